@@ -1,1 +1,8 @@
-//! placeholder
+//! The `microrobot` CLI's subcommands, as a library so system tests and tools share them.
+
+pub mod eval_model;
+pub mod eval_trajectory;
+pub mod run;
+pub mod send;
+pub mod service;
+pub mod top;

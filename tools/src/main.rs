@@ -1,1 +1,68 @@
-fn main() {}
+//! `microrobot`: the user-facing command line of the microrobot motion stack.
+//!
+//! One binary for everything a user does: run and supervise the pipeline, command and
+//! watch a running one, and evaluate the models offline. The pipeline's services are
+//! separate processes; the supervisor starts them as `microrobot service <role>`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use microrobot_cli::{eval_model, eval_trajectory, run, send, service, top};
+
+#[derive(Parser)]
+#[command(name = "microrobot", version, about = "Real-time motion stack for a 6-DOF surgical arm")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Start the planner, dynamics and actuator processes headless and supervise them.
+    Run(run::RunArgs),
+    /// Send a motion command (move, stop, estop, reset) to a running pipeline.
+    Send(send::SendArgs),
+    /// Show live rates, latencies and health of a running pipeline.
+    Top(top::TopArgs),
+    /// Evaluate a model or a trajectory: JSON lines in on stdin, JSON lines out on stdout.
+    #[command(subcommand)]
+    Eval(EvalCommand),
+    /// Run one pipeline service in this process (used by `microrobot run`).
+    #[command(hide = true)]
+    Service(service::ServiceArgs),
+}
+
+#[derive(Subcommand)]
+enum EvalCommand {
+    /// Kinematics and dynamics of a robot file for each `{"q","qd","qdd"}` line.
+    Model {
+        /// Robot description (TOML), e.g. config/robots/seed-arm.toml.
+        #[arg(long)]
+        robot: PathBuf,
+        /// Dynamics path for tau, mass_matrix, gravity_torque and coriolis_torque.
+        #[arg(long, value_enum, default_value = "newton-euler")]
+        method: eval_model::Method,
+    },
+    /// Sample one trajectory problem per line (cubic, quintic, lspb, soft).
+    Trajectory,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run(args) => return run::main(args),
+        Command::Send(args) => send::main(args),
+        Command::Top(args) => top::main(args),
+        Command::Service(args) => return service::main(args),
+        Command::Eval(EvalCommand::Model { robot, method }) => eval_model::run(&robot, method),
+        Command::Eval(EvalCommand::Trajectory) => eval_trajectory::run(),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(microrobot_runtime::exit_code::FAILURE)
+        }
+    }
+}

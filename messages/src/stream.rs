@@ -1,0 +1,122 @@
+//! The three cyclic streams of the control loop: setpoint → torque → measured state.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::MAX_JOINTS;
+
+/// Common head of every cyclic message: identity, logical time and the timestamps that
+/// make end-to-end latency and gaps measurable instead of guessed.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("microrobot::v1::Header")]
+pub struct Header {
+    /// Per-publisher sequence number, +1 per message; a gap is a lost message.
+    pub seq: u64,
+    /// Logical time: the planner tick this message belongs to (setpoint tick count).
+    pub tick: u64,
+    /// `CLOCK_MONOTONIC` ns when this message was written.
+    pub stamp_ns: u64,
+    /// `CLOCK_MONOTONIC` ns at which the setpoint this message derives from was published
+    /// (equal to `stamp_ns` on a setpoint itself).
+    pub source_stamp_ns: u64,
+}
+
+/// Planner → dynamics (and monitors): the desired joint motion at one tick.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("microrobot::v1::JointSetpoint")]
+pub struct JointSetpoint {
+    pub header: Header,
+    /// Position (rad, or m for prismatic joints).
+    pub q: [f64; MAX_JOINTS],
+    /// Velocity (rad/s or m/s).
+    pub qd: [f64; MAX_JOINTS],
+    /// Acceleration (rad/s² or m/s²).
+    pub qdd: [f64; MAX_JOINTS],
+    /// Jerk (rad/s³ or m/s³).
+    pub jerk: [f64; MAX_JOINTS],
+    /// Number of active joints.
+    pub dof: u32,
+    /// Bit set of [`setpoint_flags`].
+    pub flags: u32,
+}
+
+/// Bits of [`JointSetpoint::flags`].
+pub mod setpoint_flags {
+    /// A motion is being executed (clear: holding a constant position).
+    pub const MOVING: u32 = 1 << 0;
+    /// The stream is braking for a stop or an e-stop.
+    pub const STOPPING: u32 = 1 << 1;
+    /// An e-stop is active; motion commands other than reset are refused.
+    pub const ESTOP: u32 = 1 << 2;
+    /// The planner is holding because the actuator reported its safe state.
+    pub const HOLD_FOR_SAFE_STATE: u32 = 1 << 3;
+    /// The motion program has completed.
+    pub const PROGRAM_DONE: u32 = 1 << 4;
+}
+
+/// Dynamics → actuator: the joint torques (forces for prismatic joints) to apply.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("microrobot::v1::TorqueCommand")]
+pub struct TorqueCommand {
+    /// `header.tick` and `header.source_stamp_ns` are copied from the setpoint used.
+    pub header: Header,
+    /// Joint torque (N·m) or force (N), on the joint side of any gear.
+    pub tau: [f64; MAX_JOINTS],
+    /// The setpoint position this torque tracks, so a backend can hold it if it must.
+    pub q_desired: [f64; MAX_JOINTS],
+    /// Sequence number of the setpoint used.
+    pub setpoint_seq: u64,
+    /// Sequence number of the measured state used for feedback (`u64::MAX`: none).
+    pub state_seq: u64,
+    /// Number of active joints.
+    pub dof: u32,
+    /// Bit set of [`torque_flags`].
+    pub flags: u32,
+}
+
+/// Bits of [`TorqueCommand::flags`].
+pub mod torque_flags {
+    /// At least one joint's torque was clamped to its limit.
+    pub const CLAMPED: u32 = 1 << 0;
+    /// The measured state was stale: feedback was left out (feed-forward only).
+    pub const STATE_STALE: u32 = 1 << 1;
+    /// Feedback (computed torque) was applied.
+    pub const FEEDBACK: u32 = 1 << 2;
+}
+
+/// Actuator → planner and dynamics: the measured joint state.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("microrobot::v1::JointState")]
+pub struct JointState {
+    /// `header.tick`/`source_stamp_ns` come from the torque command last applied.
+    pub header: Header,
+    /// Measured position (rad or m).
+    pub q: [f64; MAX_JOINTS],
+    /// Measured velocity (rad/s or m/s).
+    pub qd: [f64; MAX_JOINTS],
+    /// Torque actually applied after saturation (N·m or N).
+    pub tau_applied: [f64; MAX_JOINTS],
+    /// Sequence number of the torque command last applied (`u64::MAX`: none yet).
+    pub torque_seq: u64,
+    /// Number of active joints.
+    pub dof: u32,
+    /// The backend's lifecycle state, a [`crate::LifecycleState`] value.
+    pub lifecycle: u32,
+    /// Bit set of [`state_flags`].
+    pub flags: u32,
+    /// Padding, always 0 (keeps the layout identical in every language).
+    pub reserved: u32,
+}
+
+/// Bits of [`JointState::flags`].
+pub mod state_flags {
+    /// The backend is in its safe state (holding or damping), ignoring torque commands.
+    pub const SAFE_STATE: u32 = 1 << 0;
+    /// Torque commands are stale: the backend holds position under its own control.
+    pub const COMMAND_STALE: u32 = 1 << 1;
+    /// A commanded torque was saturated by the backend.
+    pub const SATURATED: u32 = 1 << 2;
+}

@@ -1,0 +1,78 @@
+//! The wire layout is part of the contract: drivers in C, C++ and Python mirror these
+//! structs field by field. A change here must bump `CONTRACT_VERSION`.
+
+use std::mem::{align_of, offset_of, size_of};
+
+use microrobot_messages::*;
+
+#[test]
+fn header_layout_is_four_u64() {
+    assert_eq!(size_of::<Header>(), 32);
+    assert_eq!(offset_of!(Header, tick), 8);
+    assert_eq!(offset_of!(Header, source_stamp_ns), 24);
+}
+
+#[test]
+fn setpoint_layout_is_stable() {
+    assert_eq!(offset_of!(JointSetpoint, q), 32);
+    assert_eq!(offset_of!(JointSetpoint, qd), 32 + 64);
+    assert_eq!(offset_of!(JointSetpoint, jerk), 32 + 3 * 64);
+    assert_eq!(offset_of!(JointSetpoint, dof), 32 + 4 * 64);
+    assert_eq!(size_of::<JointSetpoint>(), 32 + 4 * 64 + 8);
+    assert_eq!(align_of::<JointSetpoint>(), 8);
+}
+
+#[test]
+fn torque_and_state_layouts_are_stable() {
+    assert_eq!(offset_of!(TorqueCommand, setpoint_seq), 32 + 2 * 64);
+    assert_eq!(size_of::<TorqueCommand>(), 32 + 2 * 64 + 16 + 8);
+    assert_eq!(offset_of!(JointState, torque_seq), 32 + 3 * 64);
+    assert_eq!(size_of::<JointState>(), 32 + 3 * 64 + 8 + 16);
+}
+
+#[test]
+fn command_layout_is_stable() {
+    assert_eq!(offset_of!(MotionCommand, target), 32);
+    assert_eq!(offset_of!(MotionCommand, duration_s), 32 + 64);
+    assert_eq!(size_of::<MotionCommand>(), 32 + 64 + 16);
+}
+
+#[test]
+fn wire_enums_round_trip_and_refuse_unknown_values() {
+    for k in [
+        CommandKind::Move,
+        CommandKind::Stop,
+        CommandKind::EStop,
+        CommandKind::Reset,
+    ] {
+        assert_eq!(CommandKind::from_wire(k as u32), Some(k));
+    }
+    assert_eq!(CommandKind::from_wire(0), None);
+    assert_eq!(CommandKind::from_wire(99), None);
+    assert_eq!(ProfileKind::from_wire(5), None);
+    assert_eq!(TargetSpace::from_wire(3), None);
+    assert_eq!(ServiceRole::from_wire(4), None);
+    assert_eq!(LifecycleState::from_wire(5), None);
+}
+
+#[test]
+fn service_names_carry_version_and_instance() {
+    assert_eq!(
+        service_name("lab1", ServiceKind::Setpoint),
+        format!("microrobot/v{CONTRACT_VERSION}/lab1/setpoint")
+    );
+    let names: std::collections::HashSet<_> = ServiceKind::ALL
+        .iter()
+        .map(|k| service_name("a", *k))
+        .collect();
+    assert_eq!(names.len(), ServiceKind::ALL.len());
+}
+
+#[test]
+fn all_finite_checks_only_active_joints() {
+    let mut v = [0.0; MAX_JOINTS];
+    v[7] = f64::NAN;
+    assert!(all_finite(&v, 6));
+    assert!(!all_finite(&v, 8));
+    assert!(!all_finite(&v, 9));
+}
