@@ -1,0 +1,71 @@
+//! [`ModelData`]: preallocated scratch space for the algorithms (Pinocchio's
+//! "Data"), so that no call on the hot path allocates.
+
+use crate::math::Pose;
+use crate::robot::Robot;
+use crate::{MAX_JOINTS, MassMatrix};
+use nalgebra::Vector3;
+
+/// Scratch space and last results of the algorithms for one caller. Create it
+/// once with [`ModelData::new`] and pass it to every call; its size is fixed, so
+/// it can serve any robot of up to [`MAX_JOINTS`] joints.
+#[derive(Clone, Debug)]
+pub struct ModelData {
+    /// `cos` of each joint's DH theta (with `q` for revolute joints).
+    pub(crate) cos: [f64; MAX_JOINTS],
+    /// `sin` of each joint's DH theta.
+    pub(crate) sin: [f64; MAX_JOINTS],
+    /// Each joint's DH d (with `q` for prismatic joints).
+    pub(crate) d: [f64; MAX_JOINTS],
+    /// Frame poses in the base frame: `frames[0]` is the base, `frames[i]` DH frame `i`.
+    pub(crate) frames: [Pose; MAX_JOINTS + 1],
+    /// Tool frame in the base frame.
+    pub(crate) tool: Pose,
+    /// RNEA: body forces and moments (frame `i`, about its origin).
+    pub(crate) force: [Vector3<f64>; MAX_JOINTS],
+    pub(crate) moment: [Vector3<f64>; MAX_JOINTS],
+    /// CRBA: spatial force columns `I_c S` (moment about the base origin, force).
+    pub(crate) crba_moment: [Vector3<f64>; MAX_JOINTS],
+    pub(crate) crba_force: [Vector3<f64>; MAX_JOINTS],
+    /// Last mass matrix and its Cholesky factor (lower triangle).
+    pub(crate) mass: MassMatrix,
+    pub(crate) chol: MassMatrix,
+}
+
+impl ModelData {
+    /// Scratch for `robot` (any robot of up to [`MAX_JOINTS`] joints fits).
+    pub fn new(_robot: &Robot) -> ModelData {
+        ModelData {
+            cos: [1.0; MAX_JOINTS],
+            sin: [0.0; MAX_JOINTS],
+            d: [0.0; MAX_JOINTS],
+            frames: [Pose::IDENTITY; MAX_JOINTS + 1],
+            tool: Pose::IDENTITY,
+            force: [Vector3::zeros(); MAX_JOINTS],
+            moment: [Vector3::zeros(); MAX_JOINTS],
+            crba_moment: [Vector3::zeros(); MAX_JOINTS],
+            crba_force: [Vector3::zeros(); MAX_JOINTS],
+            mass: MassMatrix::zeros(),
+            chol: MassMatrix::zeros(),
+        }
+    }
+
+    /// Pose of DH frame `i` in the base frame after the last kinematics call
+    /// ([`crate::forward_kinematics`], [`crate::jacobian`], [`crate::mass_matrix`]):
+    /// `frame(0)` is the base, `frame(dof)` the last DH frame. Indices beyond
+    /// [`MAX_JOINTS`] give the identity.
+    pub fn frame(&self, i: usize) -> Pose {
+        self.frames.get(i).copied().unwrap_or(Pose::IDENTITY)
+    }
+
+    /// Tool frame in the base frame after the last kinematics call.
+    pub fn tool_frame(&self) -> Pose {
+        self.tool
+    }
+
+    /// Mass matrix of the last [`crate::mass_matrix`] or
+    /// [`crate::forward_dynamics`] call.
+    pub fn last_mass_matrix(&self) -> &MassMatrix {
+        &self.mass
+    }
+}

@@ -1,0 +1,210 @@
+//! Forward kinematics (seed section 2.2, eq. 1), the geometric Jacobian (seed
+//! section 2.4) and dexterity measures: manipulability, condition number,
+//! smallest singular value, rank.
+
+use crate::data::ModelData;
+use crate::math::{Pose, sin_cos};
+use crate::robot::Robot;
+use crate::{Jacobian, JointVector};
+use nalgebra::{Isometry3, SMatrix, Vector3};
+
+/// Evaluates `cos θ_i`, `sin θ_i` and `d_i` of every joint for `q` into `data`.
+#[inline]
+pub(crate) fn update_joint_values(robot: &Robot, data: &mut ModelData, q: &JointVector) {
+    for i in 0..robot.dof {
+        let jc = &robot.consts[i];
+        let (theta, d) = if jc.revolute {
+            (jc.theta0 + q[i], jc.d0)
+        } else {
+            (jc.theta0, jc.d0 + q[i])
+        };
+        let (s, c) = sin_cos(theta);
+        data.sin[i] = s;
+        data.cos[i] = c;
+        data.d[i] = d;
+    }
+}
+
+/// Chains the DH transforms from the joint values already in `data`.
+#[inline]
+pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData) {
+    for i in 0..robot.dof {
+        let jc = &robot.consts[i];
+        let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
+        let prev = data.frames[i];
+        let r = &prev.rotation;
+        // R_prev · Rz(θ): rotate the first two columns.
+        let x = r.column(0) * c + r.column(1) * s;
+        let y = r.column(1) * c - r.column(0) * s;
+        let z = r.column(2);
+        // · Rx(α): rotate the last two columns.
+        let y2 = y * jc.ca + z * jc.sa;
+        let z2 = z * jc.ca - y * jc.sa;
+        let next = &mut data.frames[i + 1];
+        next.rotation.set_column(0, &x);
+        next.rotation.set_column(1, &y2);
+        next.rotation.set_column(2, &z2);
+        // origin: o_prev + R_prev (a cθ, a sθ, d) = o_prev + a·x + d·z
+        next.translation = prev.translation + x * jc.a + z * d;
+    }
+    data.tool = data.frames[robot.dof].compose(robot.tool());
+}
+
+/// Every frame and the tool frame for `q`, left in `data`.
+#[inline]
+pub(crate) fn update_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector) {
+    update_joint_values(robot, data, q);
+    update_frames(robot, data);
+}
+
+/// Tool pose in the base frame for joint positions `q` (seed eq. 1 chained, then
+/// the tool transform). Every DH frame is left in `data` ([`ModelData::frame`]);
+/// [`ModelData::tool_frame`] gives the same pose as a rotation matrix.
+pub fn forward_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Isometry3<f64> {
+    update_kinematics(robot, data, q);
+    data.tool.to_isometry()
+}
+
+/// Geometric Jacobian of the tool frame origin in the base frame (rows
+/// `vx vy vz wx wy wz`): column `j` is `[z_{j-1} × (p − o_{j-1}); z_{j-1}]` for a
+/// revolute joint and `[z_{j-1}; 0]` for a prismatic one. Runs the forward
+/// kinematics too (frames left in `data`).
+pub fn jacobian(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Jacobian {
+    update_kinematics(robot, data, q);
+    jacobian_from_frames(robot, data)
+}
+
+/// The Jacobian from the frames already in `data`.
+pub(crate) fn jacobian_from_frames(robot: &Robot, data: &ModelData) -> Jacobian {
+    let mut jac = Jacobian::zeros();
+    let p = data.tool.translation;
+    for j in 0..robot.dof {
+        let f = &data.frames[j];
+        let z: Vector3<f64> = f.rotation.column(2).into_owned();
+        if robot.consts[j].revolute {
+            let v = z.cross(&(p - f.translation));
+            jac.fixed_view_mut::<3, 1>(0, j).copy_from(&v);
+            jac.fixed_view_mut::<3, 1>(3, j).copy_from(&z);
+        } else {
+            jac.fixed_view_mut::<3, 1>(0, j).copy_from(&z);
+        }
+    }
+    jac
+}
+
+/// Which task-space rows a dexterity measure looks at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TaskRows {
+    /// All six rows (linear and angular velocity).
+    Full,
+    /// Linear velocity rows `vx vy vz`.
+    Position,
+    /// Angular velocity rows `wx wy wz`.
+    Orientation,
+    /// Planar arm in the base xy plane: `vx vy`.
+    PlanarXy,
+}
+
+impl TaskRows {
+    fn mask(self) -> [bool; 6] {
+        match self {
+            TaskRows::Full => [true; 6],
+            TaskRows::Position => [true, true, true, false, false, false],
+            TaskRows::Orientation => [false, false, false, true, true, true],
+            TaskRows::PlanarXy => [true, true, false, false, false, false],
+        }
+    }
+}
+
+/// Singular-value summary of the Jacobian restricted to some rows and the
+/// robot's `dof` columns.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dexterity {
+    /// Singular values, largest first; only the first `count` are meaningful.
+    pub singular_values: [f64; 6],
+    /// `min(rows, dof)`.
+    pub count: usize,
+    /// Yoshikawa manipulability `sqrt(det(J Jᵀ))` over the selected rows: the
+    /// product of the singular values, 0 when `dof < rows`.
+    pub manipulability: f64,
+    /// `σ_max / σ_min` (infinite at a singularity).
+    pub condition_number: f64,
+    /// `σ_min`: distance to the nearest singularity.
+    pub smallest_singular_value: f64,
+    /// Number of singular values above `1e-9 · max(1, σ_max)`.
+    pub rank: usize,
+}
+
+/// Singular-value analysis of `jac` restricted to `rows` and the first `dof`
+/// columns. The seed arm has rank 5 of 6 everywhere (axes 1 and 2 collinear) and
+/// rank 4 at `q5 = 0`.
+pub fn dexterity(jac: &Jacobian, dof: usize, rows: TaskRows) -> Dexterity {
+    let mask = rows.mask();
+    let nrows = mask.iter().filter(|m| **m).count();
+    let dof = dof.min(crate::MAX_JOINTS);
+    // Rows not selected and columns beyond dof are zeroed: they add only zero
+    // singular values, which are dropped below.
+    let mut m = SMatrix::<f64, 8, 6>::zeros();
+    for r in 0..6 {
+        if mask[r] {
+            for c in 0..dof {
+                m[(c, r)] = jac[(r, c)];
+            }
+        }
+    }
+    let mut sv = [0.0; 6];
+    let svd = m.svd_unordered(false, false);
+    for (i, s) in svd.singular_values.iter().enumerate() {
+        sv[i] = if s.is_finite() { *s } else { f64::NAN };
+    }
+    sv.sort_by(|a, b| b.total_cmp(a));
+    let count = nrows.min(dof);
+    let used = &sv[..count];
+    let smax = used.first().copied().unwrap_or(0.0);
+    let smin = used.last().copied().unwrap_or(0.0);
+    let manipulability = if dof < nrows {
+        0.0
+    } else {
+        used.iter().product()
+    };
+    let tol = 1e-9 * smax.max(1.0);
+    Dexterity {
+        singular_values: sv,
+        count,
+        manipulability,
+        condition_number: if smin > 0.0 {
+            smax / smin
+        } else {
+            f64::INFINITY
+        },
+        smallest_singular_value: smin,
+        rank: used.iter().filter(|s| **s > tol).count(),
+    }
+}
+
+/// Yoshikawa manipulability `sqrt(det(J Jᵀ))` over `rows` (see [`dexterity`]).
+pub fn manipulability(jac: &Jacobian, dof: usize, rows: TaskRows) -> f64 {
+    dexterity(jac, dof, rows).manipulability
+}
+
+/// Condition number `σ_max / σ_min` over `rows` (see [`dexterity`]).
+pub fn condition_number(jac: &Jacobian, dof: usize, rows: TaskRows) -> f64 {
+    dexterity(jac, dof, rows).condition_number
+}
+
+/// Smallest singular value over `rows` (see [`dexterity`]).
+pub fn smallest_singular_value(jac: &Jacobian, dof: usize, rows: TaskRows) -> f64 {
+    dexterity(jac, dof, rows).smallest_singular_value
+}
+
+/// Numerical rank over `rows` (see [`dexterity`]).
+pub fn rank(jac: &Jacobian, dof: usize, rows: TaskRows) -> usize {
+    dexterity(jac, dof, rows).rank
+}
+
+/// Pose of every DH frame and the tool; convenience for callers that want the
+/// homogeneous matrices (e.g. the eval interface).
+pub fn tool_pose(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose {
+    update_kinematics(robot, data, q);
+    data.tool
+}

@@ -1,0 +1,217 @@
+//! The seed's Lagrange-Euler formulation (eqs. 18–20) as corrected in DESIGN.md,
+//! written literally with 4×4 homogeneous matrices: the independent reference
+//! that the tests hold the Newton-Euler fast path against. Slow by design
+//! (O(n⁴) matrix products); not for the control loop.
+//!
+//! * `U_ij = ∂⁰T_i/∂q_j = ⁰T_{j−1} Q_j ʲ⁻¹T_i` for `j ≤ i`, else 0;
+//! * `U_ijk = ∂U_ij/∂q_k`, `Q` inserted at both joints, in chain order;
+//! * `D_ij = Σ_{p ≥ max(i,j)} Tr(U_pj J_p U_piᵀ)`,
+//!   `D_ijk = Σ_{p ≥ max(i,j,k)} Tr(U_pjk J_p U_piᵀ)`,
+//!   `D_i = Σ_{p ≥ i} −m_p gᵀ U_pi r̄_p`;
+//! * `τ_i = Σ_j D_ij q̈_j + I_act,i q̈_i + Σ_j Σ_k D_ijk q̇_j q̇_k + D_i` (+ friction);
+//! * `J_p = [[½tr(I_O)𝟙 − I_O, m c], [m cᵀ, m]]`, the pseudo-inertia about frame
+//!   `p`'s origin (`I_O` by the parallel-axis theorem from the inertia about the
+//!   centre of mass).
+//!
+//! Indices in the code are zero-based: joint `j` (0..n) moves frame `j+1`, and
+//! body `p` (0..n) is attached to frame `p+1`.
+
+use crate::robot::{Robot, friction};
+use crate::{JointVector, MAX_JOINTS, MassMatrix};
+use nalgebra::{Matrix3, Matrix4, Vector4};
+
+type Mat4 = Matrix4<f64>;
+
+/// Homogeneous matrices of one configuration.
+struct Chain {
+    n: usize,
+    /// `Q_j` (revolute: ∂Rz; prismatic: ∂Tz), seed eq. 18.
+    q_mat: [Mat4; MAX_JOINTS],
+    /// `span[a][b] = ᵃT_b` for `a <= b` (frames 0..=n).
+    span: [[Mat4; MAX_JOINTS + 1]; MAX_JOINTS + 1],
+    /// Pseudo-inertia `J_p` of body `p` about frame `p+1`'s origin.
+    pseudo: [Mat4; MAX_JOINTS],
+}
+
+/// `ʲ⁻¹T_j` of seed eq. 1 for joint `j` (zero-based) at position `q`.
+fn dh_matrix(robot: &Robot, j: usize, q: f64) -> Mat4 {
+    let joint = &robot.joints()[j];
+    let revolute = robot.consts[j].revolute;
+    let theta = joint.dh.theta + if revolute { q } else { 0.0 };
+    let d = joint.dh.d + if revolute { 0.0 } else { q };
+    let (st, ct) = theta.sin_cos();
+    let (sa, ca) = joint.dh.alpha.sin_cos();
+    let a = joint.dh.a;
+    Mat4::new(
+        ct,
+        -st * ca,
+        st * sa,
+        a * ct, //
+        st,
+        ct * ca,
+        -ct * sa,
+        a * st, //
+        0.0,
+        sa,
+        ca,
+        d, //
+        0.0,
+        0.0,
+        0.0,
+        1.0,
+    )
+}
+
+fn pseudo_inertia(mass: f64, com: &nalgebra::Vector3<f64>, inertia_com: &Matrix3<f64>) -> Mat4 {
+    let i_o =
+        inertia_com + (Matrix3::identity() * com.norm_squared() - com * com.transpose()) * mass;
+    let upper = Matrix3::identity() * (0.5 * i_o.trace()) - i_o;
+    let mut j = Mat4::zeros();
+    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&upper);
+    j.fixed_view_mut::<3, 1>(0, 3).copy_from(&(com * mass));
+    j.fixed_view_mut::<1, 3>(3, 0)
+        .copy_from(&(com * mass).transpose());
+    j[(3, 3)] = mass;
+    j
+}
+
+impl Chain {
+    fn new(robot: &Robot, q: &JointVector) -> Chain {
+        let n = robot.dof();
+        let mut q_mat = [Mat4::zeros(); MAX_JOINTS];
+        let mut pseudo = [Mat4::zeros(); MAX_JOINTS];
+        let mut local = [Mat4::identity(); MAX_JOINTS];
+        for j in 0..n {
+            local[j] = dh_matrix(robot, j, q[j]);
+            let mut qm = Mat4::zeros();
+            if robot.consts[j].revolute {
+                qm[(0, 1)] = -1.0;
+                qm[(1, 0)] = 1.0;
+            } else {
+                qm[(2, 3)] = 1.0;
+            }
+            q_mat[j] = qm;
+            let b = &robot.bodies[j];
+            pseudo[j] = pseudo_inertia(b.mass, &b.com, &b.inertia_com);
+        }
+        let mut span = [[Mat4::identity(); MAX_JOINTS + 1]; MAX_JOINTS + 1];
+        for a in 0..=n {
+            for b in (a + 1)..=n {
+                span[a][b] = span[a][b - 1] * local[b - 1];
+            }
+        }
+        Chain {
+            n,
+            q_mat,
+            span,
+            pseudo,
+        }
+    }
+
+    /// `U_pj = ∂⁰T_{p+1}/∂q_j = ⁰T_j Q_j ʲT_{p+1}` (zero-based `j <= p`), else 0.
+    fn u(&self, p: usize, j: usize) -> Mat4 {
+        if j > p {
+            return Mat4::zeros();
+        }
+        self.span[0][j] * self.q_mat[j] * self.span[j][p + 1]
+    }
+
+    /// `U_pjk = ∂²⁰T_{p+1}/∂q_j∂q_k`: `Q` inserted at both joints in chain order.
+    fn u2(&self, p: usize, j: usize, k: usize) -> Mat4 {
+        if j > p || k > p {
+            return Mat4::zeros();
+        }
+        let (lo, hi) = if j <= k { (j, k) } else { (k, j) };
+        self.span[0][lo]
+            * self.q_mat[lo]
+            * self.span[lo][hi]
+            * self.q_mat[hi]
+            * self.span[hi][p + 1]
+    }
+}
+
+/// `Tr(A Bᵀ)`.
+fn trace_abt(a: &Mat4, b: &Mat4) -> f64 {
+    a.component_mul(b).sum()
+}
+
+/// `D_ij + I_act,i δ_ij`: the mass matrix of eq. 20, rotor inertia on the diagonal.
+pub fn mass_matrix(robot: &Robot, q: &JointVector) -> MassMatrix {
+    let ch = Chain::new(robot, q);
+    mass_matrix_of(robot, &ch)
+}
+
+fn mass_matrix_of(robot: &Robot, ch: &Chain) -> MassMatrix {
+    let n = ch.n;
+    let mut m = MassMatrix::zeros();
+    for i in 0..n {
+        for j in 0..n {
+            let mut dij = 0.0;
+            for p in i.max(j)..n {
+                dij += trace_abt(&(ch.u(p, j) * ch.pseudo[p]), &ch.u(p, i));
+            }
+            m[(i, j)] = dij;
+        }
+        m[(i, i)] += robot.consts[i].rotor;
+    }
+    m
+}
+
+/// `Σ_j Σ_k D_ijk q̇_j q̇_k`: Coriolis and centrifugal torque of eq. 20.
+pub fn coriolis(robot: &Robot, q: &JointVector, qd: &JointVector) -> JointVector {
+    let ch = Chain::new(robot, q);
+    coriolis_of(&ch, qd)
+}
+
+fn coriolis_of(ch: &Chain, qd: &JointVector) -> JointVector {
+    let n = ch.n;
+    let mut tau = JointVector::zeros();
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                let mut dijk = 0.0;
+                for p in i.max(j).max(k)..n {
+                    dijk += trace_abt(&(ch.u2(p, j, k) * ch.pseudo[p]), &ch.u(p, i));
+                }
+                tau[i] += dijk * qd[j] * qd[k];
+            }
+        }
+    }
+    tau
+}
+
+/// `D_i = Σ_{p ≥ i} −m_p gᵀ U_pi r̄_p`: gravity torque of eq. 20.
+pub fn gravity(robot: &Robot, q: &JointVector) -> JointVector {
+    let ch = Chain::new(robot, q);
+    gravity_of(robot, &ch)
+}
+
+fn gravity_of(robot: &Robot, ch: &Chain) -> JointVector {
+    let g = robot.gravity();
+    let g4 = Vector4::new(g.x, g.y, g.z, 0.0);
+    let mut tau = JointVector::zeros();
+    for i in 0..ch.n {
+        for p in i..ch.n {
+            let b = &robot.bodies[p];
+            let r_bar = Vector4::new(b.com.x, b.com.y, b.com.z, 1.0);
+            tau[i] += -b.mass * g4.dot(&(ch.u(p, i) * r_bar));
+        }
+    }
+    tau
+}
+
+/// Joint torques of eq. 20 (with rotor inertia) plus the same viscous and
+/// Coulomb friction as [`crate::rnea`].
+pub fn torque(robot: &Robot, q: &JointVector, qd: &JointVector, qdd: &JointVector) -> JointVector {
+    let ch = Chain::new(robot, q);
+    let m = mass_matrix_of(robot, &ch);
+    let mut tau = coriolis_of(&ch, qd) + gravity_of(robot, &ch);
+    for i in 0..ch.n {
+        for j in 0..ch.n {
+            tau[i] += m[(i, j)] * qdd[j];
+        }
+        let jc = &robot.consts[i];
+        tau[i] += friction(jc.viscous, jc.coulomb, qd[i]);
+    }
+    tau
+}

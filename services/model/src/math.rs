@@ -1,0 +1,210 @@
+//! Numeric building blocks of the hot path: a fast sine/cosine pair, the two
+//! elementary rotations of a DH step, and [`Pose`], a rigid transform kept as a
+//! rotation matrix plus a translation (no quaternion round trips on the hot path).
+
+use nalgebra::{
+    Isometry3, Matrix3, Matrix4, Point3, Rotation3, Translation3, UnitQuaternion, Vector3,
+};
+
+/// Rigid transform `x ↦ rotation · x + translation`; the rotation matrix is kept
+/// as computed (orthonormal up to rounding).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    /// Rotation matrix (columns are the frame's axes in the parent frame).
+    pub rotation: Matrix3<f64>,
+    /// Origin of the frame in the parent frame, metres.
+    pub translation: Vector3<f64>,
+}
+
+impl Default for Pose {
+    fn default() -> Self {
+        Self::IDENTITY
+    }
+}
+
+impl Pose {
+    /// The identity transform.
+    pub const IDENTITY: Pose = Pose {
+        rotation: Matrix3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        translation: Vector3::new(0.0, 0.0, 0.0),
+    };
+
+    /// Builds a pose from a translation (m) and roll-pitch-yaw angles (rad),
+    /// `R = Rz(yaw) · Ry(pitch) · Rx(roll)` (the URDF convention).
+    pub fn from_xyz_rpy(xyz: Vector3<f64>, rpy: Vector3<f64>) -> Pose {
+        let rotation = *Rotation3::from_euler_angles(rpy.x, rpy.y, rpy.z).matrix();
+        Pose {
+            rotation,
+            translation: xyz,
+        }
+    }
+
+    /// Composition `self · other` (other expressed in self's frame).
+    #[inline]
+    pub fn compose(&self, other: &Pose) -> Pose {
+        Pose {
+            rotation: self.rotation * other.rotation,
+            translation: self.translation + self.rotation * other.translation,
+        }
+    }
+
+    /// Maps a point given in this frame to the parent frame.
+    #[inline]
+    pub fn transform_point(&self, p: &Vector3<f64>) -> Vector3<f64> {
+        self.rotation * p + self.translation
+    }
+
+    /// 4×4 homogeneous matrix `[[R, t], [0, 1]]`.
+    pub fn to_homogeneous(&self) -> Matrix4<f64> {
+        let mut m = Matrix4::identity();
+        m.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.rotation);
+        m.fixed_view_mut::<3, 1>(0, 3).copy_from(&self.translation);
+        m
+    }
+
+    /// The same transform as an [`Isometry3`] (rotation converted to a unit
+    /// quaternion; exact up to rounding for an orthonormal matrix).
+    pub fn to_isometry(&self) -> Isometry3<f64> {
+        let rot = Rotation3::from_matrix_unchecked(self.rotation);
+        Isometry3::from_parts(
+            Translation3::from(self.translation),
+            UnitQuaternion::from_rotation_matrix(&rot),
+        )
+    }
+
+    /// Converts an [`Isometry3`].
+    pub fn from_isometry(iso: &Isometry3<f64>) -> Pose {
+        Pose {
+            rotation: *iso.rotation.to_rotation_matrix().matrix(),
+            translation: iso.translation.vector,
+        }
+    }
+
+    /// Origin as a point.
+    pub fn origin(&self) -> Point3<f64> {
+        Point3::from(self.translation)
+    }
+}
+
+/// `(sin x, cos x)`, accurate to about one ulp for `|x| < 1e5` (Cody-Waite
+/// reduction by π/2 and fdlibm's minimax kernels), several times faster than two
+/// libm calls. Larger or non-finite arguments fall back to [`f64::sin_cos`].
+#[inline]
+pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
+    // `!(a < b)` also routes NaN to the fallback.
+    if !(x.abs() < 1.0e5) {
+        return x.sin_cos();
+    }
+    const TWO_OVER_PI: f64 = 6.366_197_723_675_813_8e-1;
+    const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+    // π/2 split in 33-bit pieces: k · PIO2_1 and k · PIO2_2 are exact for |k| < 2^20.
+    const PIO2_1: f64 = 1.570_796_326_734_125_6e0;
+    const PIO2_2: f64 = 6.077_100_506_303_966e-11;
+    const PIO2_3: f64 = 2.022_266_248_711_166_5e-21;
+    let k = (x * TWO_OVER_PI + ROUND_MAGIC) - ROUND_MAGIC;
+    let r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_3;
+    let (s, c) = sin_cos_kernel(r);
+    match (k as i64) & 3 {
+        0 => (s, c),
+        1 => (c, -s),
+        2 => (-s, -c),
+        _ => (-c, s),
+    }
+}
+
+/// sin and cos on `[-π/4, π/4]` (fdlibm `__kernel_sin` / `__kernel_cos` coefficients).
+#[inline]
+fn sin_cos_kernel(r: f64) -> (f64, f64) {
+    const S1: f64 = -1.666_666_666_666_663_2e-1;
+    const S2: f64 = 8.333_333_333_322_49e-3;
+    const S3: f64 = -1.984_126_982_985_795e-4;
+    const S4: f64 = 2.755_731_370_707_006_8e-6;
+    const S5: f64 = -2.505_076_025_340_686_3e-8;
+    const S6: f64 = 1.589_690_995_211_55e-10;
+    const C1: f64 = 4.166_666_666_666_660_2e-2;
+    const C2: f64 = -1.388_888_888_887_411e-3;
+    const C3: f64 = 2.480_158_728_947_673e-5;
+    const C4: f64 = -2.755_731_435_139_066_3e-7;
+    const C5: f64 = 2.087_572_321_298_175e-9;
+    const C6: f64 = -1.135_964_755_778_819_5e-11;
+    let z = r * r;
+    let s = r + r * z * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6)))));
+    let pc = z * z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6)))));
+    let hz = 0.5 * z;
+    let w = 1.0 - hz;
+    let c = w + (((1.0 - w) - hz) + pc);
+    (s, c)
+}
+
+/// `Rᵀ v` for the DH rotation `R = Rz(θ) Rx(α)` given `(cos θ, sin θ)` and `(cos α, sin α)`.
+#[inline(always)]
+pub(crate) fn dh_rot_t(c: f64, s: f64, ca: f64, sa: f64, v: &Vector3<f64>) -> Vector3<f64> {
+    let ux = c * v.x + s * v.y;
+    let uy = -s * v.x + c * v.y;
+    Vector3::new(ux, ca * uy + sa * v.z, -sa * uy + ca * v.z)
+}
+
+/// `R v` for the DH rotation `R = Rz(θ) Rx(α)`.
+#[inline(always)]
+pub(crate) fn dh_rot(c: f64, s: f64, ca: f64, sa: f64, v: &Vector3<f64>) -> Vector3<f64> {
+    let uy = ca * v.y - sa * v.z;
+    let uz = sa * v.y + ca * v.z;
+    Vector3::new(c * v.x - s * uy, s * v.x + c * uy, uz)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fast_sin_cos_matches_libm_to_a_few_ulp() {
+        let mut x = -60.0_f64;
+        let mut worst = 0.0_f64;
+        while x < 60.0 {
+            let (s, c) = sin_cos(x);
+            worst = worst.max((s - x.sin()).abs()).max((c - x.cos()).abs());
+            x += 0.000_731;
+        }
+        assert!(worst < 4.0e-16, "worst error {worst:e}");
+        for x in [
+            0.0,
+            -0.0,
+            1e-300,
+            std::f64::consts::FRAC_PI_4,
+            1e6,
+            f64::NAN,
+            f64::INFINITY,
+        ] {
+            let (s, c) = sin_cos(x);
+            let (es, ec) = x.sin_cos();
+            assert!(
+                (s - es).abs() < 4.0e-16 || (s.is_nan() && es.is_nan()),
+                "sin({x}) = {s}, libm {es}"
+            );
+            assert!(
+                (c - ec).abs() < 4.0e-16 || (c.is_nan() && ec.is_nan()),
+                "cos({x}) = {c}, libm {ec}"
+            );
+        }
+    }
+
+    #[test]
+    fn dh_rotation_helpers_match_the_matrix_of_seed_eq_1() {
+        let (th, al) = (0.7_f64, -1.2_f64);
+        let r = Matrix3::new(
+            th.cos(),
+            -th.sin() * al.cos(),
+            th.sin() * al.sin(),
+            th.sin(),
+            th.cos() * al.cos(),
+            -th.cos() * al.sin(),
+            0.0,
+            al.sin(),
+            al.cos(),
+        );
+        let v = Vector3::new(0.3, -1.1, 2.5);
+        let (c, s, ca, sa) = (th.cos(), th.sin(), al.cos(), al.sin());
+        assert!((dh_rot(c, s, ca, sa, &v) - r * v).norm() < 1e-15);
+        assert!((dh_rot_t(c, s, ca, sa, &v) - r.transpose() * v).norm() < 1e-15);
+    }
+}

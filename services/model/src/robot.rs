@@ -1,0 +1,371 @@
+//! The immutable robot model: joints with DH parameters, limits, link inertia,
+//! actuator and friction data, the tool frame and payload, plus the compact
+//! per-joint constants that the hot-path algorithms read.
+
+use crate::MAX_JOINTS;
+use crate::math::Pose;
+use nalgebra::{Matrix3, Vector3};
+
+/// Joint type: the joint variable `q` is added to DH `theta` (revolute, rad) or
+/// to DH `d` (prismatic, m).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JointKind {
+    /// Rotation about `z_{i-1}`.
+    Revolute,
+    /// Translation along `z_{i-1}`.
+    Prismatic,
+}
+
+/// Constant part of a standard DH row, SI (rad, m): `T = Rz(theta) Tz(d) Tx(a) Rx(alpha)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DhParameters {
+    /// Constant offset added to a revolute joint's angle (rad).
+    pub theta: f64,
+    /// Offset along `z_{i-1}` (m); a prismatic joint's variable adds to it.
+    pub d: f64,
+    /// Link length along `x_i` (m).
+    pub a: f64,
+    /// Link twist about `x_i` (rad).
+    pub alpha: f64,
+}
+
+/// Joint limits in SI: rad (or m), rad/s, rad/s², rad/s³, N·m (or N).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JointLimits {
+    /// Lower position limit.
+    pub min: f64,
+    /// Upper position limit.
+    pub max: f64,
+    /// Largest speed magnitude.
+    pub velocity: f64,
+    /// Largest acceleration magnitude.
+    pub acceleration: f64,
+    /// Largest jerk magnitude.
+    pub jerk: f64,
+    /// Largest joint torque (revolute, N·m) or force (prismatic, N) magnitude.
+    pub effort: f64,
+}
+
+impl JointLimits {
+    /// `q` clamped into `[min, max]`.
+    pub fn clamp(&self, q: f64) -> f64 {
+        q.max(self.min).min(self.max)
+    }
+
+    /// Whether `min <= q <= max`.
+    pub fn contains(&self, q: f64) -> bool {
+        q >= self.min && q <= self.max
+    }
+}
+
+/// Rigid-body inertia of one link (or the payload): mass (kg), centre of mass
+/// (m) and inertia tensor about the centre of mass (kg·m²), both in the link's
+/// own DH frame `i` (the frame at the end of link `i`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkInertia {
+    /// Mass, kg.
+    pub mass: f64,
+    /// Centre of mass in frame `i`, m.
+    pub com: Vector3<f64>,
+    /// Inertia about the centre of mass, axes of frame `i`, kg·m².
+    pub inertia: Matrix3<f64>,
+}
+
+impl LinkInertia {
+    /// A body with no mass.
+    pub const ZERO: LinkInertia = LinkInertia {
+        mass: 0.0,
+        com: Vector3::new(0.0, 0.0, 0.0),
+        inertia: Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    };
+
+    /// The same body seen from a frame in which this body's frame has pose `pose`.
+    pub fn transformed(&self, pose: &Pose) -> LinkInertia {
+        LinkInertia {
+            mass: self.mass,
+            com: pose.transform_point(&self.com),
+            inertia: pose.rotation * self.inertia * pose.rotation.transpose(),
+        }
+    }
+
+    /// Both bodies rigidly joined (parallel-axis theorem), same frame.
+    pub fn combined(&self, other: &LinkInertia) -> LinkInertia {
+        let mass = self.mass + other.mass;
+        if mass <= 0.0 {
+            return LinkInertia {
+                mass: 0.0,
+                com: Vector3::zeros(),
+                inertia: self.inertia + other.inertia,
+            };
+        }
+        let com = (self.com * self.mass + other.com * other.mass) / mass;
+        let shift = |b: &LinkInertia| {
+            let d = b.com - com;
+            (Matrix3::identity() * d.norm_squared() - d * d.transpose()) * b.mass
+        };
+        LinkInertia {
+            mass,
+            com,
+            inertia: self.inertia + shift(self) + other.inertia + shift(other),
+        }
+    }
+
+    /// Mass and inertia multiplied by `factor` (same centre of mass).
+    pub fn scaled(&self, factor: f64) -> LinkInertia {
+        LinkInertia {
+            mass: self.mass * factor,
+            com: self.com,
+            inertia: self.inertia * factor,
+        }
+    }
+}
+
+/// One joint and the link that follows it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Joint {
+    /// Name from the robot file (unique within the robot).
+    pub name: String,
+    /// Revolute or prismatic.
+    pub kind: JointKind,
+    /// Constant DH parameters.
+    pub dh: DhParameters,
+    /// Position, rate and effort limits.
+    pub limits: JointLimits,
+    /// Inertia of link `i` (without payload).
+    pub link: LinkInertia,
+    /// Actuator (rotor) inertia reflected to the joint side: adds
+    /// `rotor_inertia · qdd_i` to joint `i`'s torque (kg·m², or kg for prismatic).
+    pub rotor_inertia: f64,
+    /// Gear ratio `N`: motor torque = joint torque / N (see [`Joint::motor_torque`]).
+    /// Rotor inertia and friction are already given on the joint side, so the
+    /// ratio does not enter the joint-space dynamics.
+    pub gear_ratio: f64,
+    /// Viscous friction on the joint side, N·m·s/rad (or N·s/m).
+    pub viscous_friction: f64,
+    /// Coulomb friction magnitude on the joint side, N·m (or N).
+    pub coulomb_friction: f64,
+}
+
+impl Joint {
+    /// Motor-side torque for a joint-side torque: `tau / gear_ratio`.
+    pub fn motor_torque(&self, joint_torque: f64) -> f64 {
+        joint_torque / self.gear_ratio
+    }
+
+    /// Friction torque `viscous · qd + coulomb · sign(qd)`, with `sign(0) = 0`
+    /// (a joint at rest carries no Coulomb term: static friction is not modelled,
+    /// and `tau(q, 0, 0)` equals the gravity torque exactly).
+    pub fn friction_torque(&self, qd: f64) -> f64 {
+        friction(self.viscous_friction, self.coulomb_friction, qd)
+    }
+}
+
+#[inline(always)]
+pub(crate) fn friction(viscous: f64, coulomb: f64, qd: f64) -> f64 {
+    let sign = if qd > 0.0 {
+        1.0
+    } else if qd < 0.0 {
+        -1.0
+    } else {
+        0.0
+    };
+    viscous * qd + coulomb * sign
+}
+
+/// Why a [`Robot`] cannot be assembled from parts.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RobotError {
+    /// The chain must have 1 to [`MAX_JOINTS`] joints.
+    #[error("a robot needs 1 to {max} joints, got {got}", max = MAX_JOINTS)]
+    JointCount {
+        /// Number of joints given.
+        got: usize,
+    },
+}
+
+/// Per-joint constants in the form the algorithms read (SI).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct JointConst {
+    pub revolute: bool,
+    pub theta0: f64,
+    pub d0: f64,
+    pub a: f64,
+    pub ca: f64,
+    pub sa: f64,
+    pub rotor: f64,
+    pub viscous: f64,
+    pub coulomb: f64,
+}
+
+/// Body `i` (link plus, for the last one, the payload) in frame `i`, in the forms
+/// the algorithms need: about the centre of mass and about the frame origin.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Body {
+    pub mass: f64,
+    pub com: Vector3<f64>,
+    /// Inertia about the centre of mass.
+    pub inertia_com: Matrix3<f64>,
+    /// First moment of mass `m · c`.
+    pub h: Vector3<f64>,
+    /// Inertia about the frame origin.
+    pub inertia_origin: Matrix3<f64>,
+}
+
+impl Default for Body {
+    fn default() -> Self {
+        Body::from_link(&LinkInertia::ZERO)
+    }
+}
+
+impl Body {
+    fn from_link(l: &LinkInertia) -> Body {
+        let c = l.com;
+        let inertia_origin =
+            l.inertia + (Matrix3::identity() * c.norm_squared() - c * c.transpose()) * l.mass;
+        Body {
+            mass: l.mass,
+            com: c,
+            inertia_com: l.inertia,
+            h: c * l.mass,
+            inertia_origin,
+        }
+    }
+}
+
+/// An immutable serial-arm model in SI units. Cheap to share (`&Robot`) between
+/// threads; per-caller scratch lives in [`crate::ModelData`].
+#[derive(Clone, Debug)]
+pub struct Robot {
+    name: String,
+    gravity: Vector3<f64>,
+    joints: Vec<Joint>,
+    tool: Pose,
+    payload: Option<LinkInertia>,
+    pub(crate) dof: usize,
+    pub(crate) consts: [JointConst; MAX_JOINTS],
+    pub(crate) bodies: [Body; MAX_JOINTS],
+}
+
+impl Robot {
+    /// Assembles a robot from already validated parts (the file loader checks
+    /// every value; this constructor only refuses a chain that does not fit).
+    /// `tool` is the fixed transform from the last DH frame to the tool frame;
+    /// `payload` is given in the tool frame and is added to the last link.
+    pub fn new(
+        name: impl Into<String>,
+        gravity: Vector3<f64>,
+        joints: Vec<Joint>,
+        tool: Pose,
+        payload: Option<LinkInertia>,
+    ) -> Result<Robot, RobotError> {
+        let dof = joints.len();
+        if dof == 0 || dof > MAX_JOINTS {
+            return Err(RobotError::JointCount { got: dof });
+        }
+        let mut consts = [JointConst::default(); MAX_JOINTS];
+        let mut bodies = [Body::default(); MAX_JOINTS];
+        for (i, j) in joints.iter().enumerate() {
+            consts[i] = JointConst {
+                revolute: j.kind == JointKind::Revolute,
+                theta0: j.dh.theta,
+                d0: j.dh.d,
+                a: j.dh.a,
+                ca: j.dh.alpha.cos(),
+                sa: j.dh.alpha.sin(),
+                rotor: j.rotor_inertia,
+                viscous: j.viscous_friction,
+                coulomb: j.coulomb_friction,
+            };
+            let mut link = j.link;
+            if i == dof - 1 {
+                if let Some(p) = &payload {
+                    link = link.combined(&p.transformed(&tool));
+                }
+            }
+            bodies[i] = Body::from_link(&link);
+        }
+        Ok(Robot {
+            name: name.into(),
+            gravity,
+            joints,
+            tool,
+            payload,
+            dof,
+            consts,
+            bodies,
+        })
+    }
+
+    /// Robot name from the file.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Number of joints (1 to [`MAX_JOINTS`]).
+    pub fn dof(&self) -> usize {
+        self.dof
+    }
+
+    /// Joints, base to tip.
+    pub fn joints(&self) -> &[Joint] {
+        &self.joints
+    }
+
+    /// Gravity acceleration vector in the base frame, m/s².
+    pub fn gravity(&self) -> Vector3<f64> {
+        self.gravity
+    }
+
+    /// Fixed transform from the last DH frame to the tool frame.
+    pub fn tool(&self) -> &Pose {
+        &self.tool
+    }
+
+    /// Payload (in the tool frame), if any.
+    pub fn payload(&self) -> Option<&LinkInertia> {
+        self.payload.as_ref()
+    }
+
+    /// Inertia of body `i` as the dynamics sees it: link `i`, plus the payload for
+    /// the last link; frame `i`. `None` when `i >= dof`.
+    pub fn body_inertia(&self, i: usize) -> Option<LinkInertia> {
+        (i < self.dof).then(|| {
+            let b = &self.bodies[i];
+            LinkInertia {
+                mass: b.mass,
+                com: b.com,
+                inertia: b.inertia_com,
+            }
+        })
+    }
+
+    /// Lower and upper position limits as joint vectors (zeros beyond `dof`).
+    pub fn position_limits(&self) -> (crate::JointVector, crate::JointVector) {
+        let mut lo = crate::JointVector::zeros();
+        let mut hi = crate::JointVector::zeros();
+        for (i, j) in self.joints.iter().enumerate() {
+            lo[i] = j.limits.min;
+            hi[i] = j.limits.max;
+        }
+        (lo, hi)
+    }
+
+    /// A deliberately wrong copy for simulation studies: every link mass and
+    /// inertia tensor (and the payload's) multiplied by `factor`; centres of mass,
+    /// geometry, rotor inertia and friction unchanged.
+    pub fn with_scaled_link_masses(&self, factor: f64) -> Robot {
+        let joints = self
+            .joints
+            .iter()
+            .map(|j| Joint {
+                link: j.link.scaled(factor),
+                ..j.clone()
+            })
+            .collect();
+        let payload = self.payload.map(|p| p.scaled(factor));
+        // The joint count is unchanged, so assembling cannot fail; keep the
+        // original rather than panic if it ever did.
+        Robot::new(self.name.clone(), self.gravity, joints, self.tool, payload)
+            .unwrap_or_else(|_| self.clone())
+    }
+}
