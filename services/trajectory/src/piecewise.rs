@@ -1,0 +1,193 @@
+//! One joint's motion as up to [`MAX_PHASES`] polynomial pieces (degree ≤ 5).
+//!
+//! Every profile — a single cubic or quintic, the three LSPB pieces, the up to nine
+//! constant-jerk phases of soft motion — is stored the same way, so sampling is one
+//! short scan and one Horner evaluation, with no allocation.
+
+/// Most pieces one joint's motion can have (brake 2 + ramp 3 + cruise 1 + ramp 3).
+pub const MAX_PHASES: usize = 10;
+
+/// A constant-jerk phase: duration and jerk.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Phase {
+    /// Duration (s).
+    pub t: f64,
+    /// Jerk (rad/s³).
+    pub j: f64,
+}
+
+/// A short fixed-capacity list of constant-jerk phases.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Phases {
+    /// Phases in order; only the first `n` are used.
+    pub p: [Phase; MAX_PHASES],
+    /// Number of phases used.
+    pub n: usize,
+}
+
+impl Phases {
+    /// Appends a phase; zero-length phases are dropped.
+    #[inline]
+    pub fn push(&mut self, t: f64, j: f64) {
+        if t > 0.0 && self.n < MAX_PHASES {
+            self.p[self.n] = Phase { t, j };
+            self.n += 1;
+        }
+    }
+    /// Appends all phases of `other`.
+    pub fn extend(&mut self, other: &Phases) {
+        for ph in &other.p[..other.n] {
+            self.push(ph.t, ph.j);
+        }
+    }
+    /// Total duration.
+    pub fn duration(&self) -> f64 {
+        self.p[..self.n].iter().map(|p| p.t).sum()
+    }
+    /// Integrates the phases from (p, v, a).
+    #[inline]
+    pub fn integrate(&self, s: Kin) -> Kin {
+        self.p[..self.n]
+            .iter()
+            .fold(s, |s, ph| s.advance(ph.t, ph.j))
+    }
+}
+
+/// Position, velocity, acceleration of one joint.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Kin {
+    /// Position.
+    pub p: f64,
+    /// Velocity.
+    pub v: f64,
+    /// Acceleration.
+    pub a: f64,
+}
+
+impl Kin {
+    /// State after `t` seconds at constant jerk `j`.
+    #[inline]
+    pub fn advance(self, t: f64, j: f64) -> Kin {
+        Kin {
+            p: self.p + t * (self.v + t * (0.5 * self.a + t * j / 6.0)),
+            v: self.v + t * (self.a + 0.5 * t * j),
+            a: self.a + t * j,
+        }
+    }
+    /// Mirror image (all signs flipped).
+    #[inline]
+    pub fn neg(self) -> Kin {
+        Kin {
+            p: -self.p,
+            v: -self.v,
+            a: -self.a,
+        }
+    }
+}
+
+/// One joint's motion: pieces of polynomials in local time, each starting where the
+/// previous ends. After the last piece the joint holds its final state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Piecewise {
+    n: usize,
+    /// End time of each piece (cumulative from 0).
+    end: [f64; MAX_PHASES],
+    /// Coefficients c0..c5 of q(τ) = Σ cᵢ τⁱ, τ = local time in the piece.
+    c: [[f64; 6]; MAX_PHASES],
+    /// Final (q, qd, qdd), returned at and after the end.
+    fin: Kin,
+}
+
+impl Piecewise {
+    /// A joint that holds still at `p`.
+    pub fn hold(p: f64) -> Self {
+        Self {
+            n: 0,
+            end: [0.0; MAX_PHASES],
+            c: [[0.0; 6]; MAX_PHASES],
+            fin: Kin { p, v: 0.0, a: 0.0 },
+        }
+    }
+
+    /// Constant-jerk phases from `start`; `fin` overrides the integrated final state
+    /// (to land exactly on the target despite round-off), `sign` mirrors everything.
+    pub fn from_phases(start: Kin, phases: &Phases, fin: Option<Kin>) -> Self {
+        let mut out = Self::hold(start.p);
+        let mut s = start;
+        let mut t = 0.0;
+        for ph in &phases.p[..phases.n] {
+            let i = out.n;
+            t += ph.t;
+            out.end[i] = t;
+            out.c[i] = [s.p, s.v, 0.5 * s.a, ph.j / 6.0, 0.0, 0.0];
+            out.n += 1;
+            s = s.advance(ph.t, ph.j);
+        }
+        out.fin = fin.unwrap_or(s);
+        out
+    }
+
+    /// A single polynomial piece of length `t` ending in `fin`.
+    pub fn polynomial(t: f64, c: [f64; 6], fin: Kin) -> Self {
+        let mut out = Self::hold(fin.p);
+        out.n = 1;
+        out.end[0] = t;
+        out.c[0] = c;
+        out.fin = fin;
+        out
+    }
+
+    /// Appends a polynomial piece of length `t` (used by LSPB).
+    pub fn push_piece(&mut self, t: f64, c: [f64; 6], fin: Kin) {
+        if self.n < MAX_PHASES && t > 0.0 {
+            let t0 = self.duration();
+            self.end[self.n] = t0 + t;
+            self.c[self.n] = c;
+            self.n += 1;
+        }
+        self.fin = fin;
+    }
+
+    /// Duration of the motion.
+    #[inline]
+    pub fn duration(&self) -> f64 {
+        if self.n == 0 {
+            0.0
+        } else {
+            self.end[self.n - 1]
+        }
+    }
+
+    /// Final state.
+    pub fn final_state(&self) -> Kin {
+        self.fin
+    }
+
+    /// Number of pieces and their (start, end, coefficients) — for peak analysis.
+    pub fn pieces(&self) -> impl Iterator<Item = (f64, f64, &[f64; 6])> + '_ {
+        (0..self.n).map(move |i| {
+            let t0 = if i == 0 { 0.0 } else { self.end[i - 1] };
+            (t0, self.end[i], &self.c[i])
+        })
+    }
+
+    /// (q, qd, qdd, jerk) at time `t`; before 0 the start, after the end the final state.
+    #[inline]
+    pub fn eval(&self, t: f64) -> [f64; 4] {
+        let mut i = 0;
+        while i < self.n && t >= self.end[i] {
+            i += 1;
+        }
+        if i == self.n {
+            return [self.fin.p, self.fin.v, self.fin.a, 0.0];
+        }
+        let t0 = if i == 0 { 0.0 } else { self.end[i - 1] };
+        let x = (t - t0).max(0.0);
+        let c = &self.c[i];
+        let q = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
+        let qd = c[1] + x * (2.0 * c[2] + x * (3.0 * c[3] + x * (4.0 * c[4] + x * 5.0 * c[5])));
+        let qdd = 2.0 * c[2] + x * (6.0 * c[3] + x * (12.0 * c[4] + x * 20.0 * c[5]));
+        let j = 6.0 * c[3] + x * (24.0 * c[4] + x * 60.0 * c[5]);
+        [q, qd, qdd, j]
+    }
+}

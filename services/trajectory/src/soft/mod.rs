@@ -1,0 +1,91 @@
+//! Soft motion: time-optimal jerk-limited single-joint profiles (seed section 3.2.4).
+//!
+//! Every profile here is a list of constant-jerk phases with |jerk| = jmax or 0, built
+//! from one primitive, the time-optimal *velocity change* (v0, a0) → (vf, 0)
+//! ([`velocity::velocity_change`]):
+//!
+//! * [`rest_to_rest`]: the seed's closed form (cases 1–3 and vmax < amax²/jmax).
+//! * [`from_state`]: from any (q, v, a) to a target at rest. A *push* of τ seconds at
+//!   +jmax (holding +amax once reached) followed by the velocity change to rest; τ is
+//!   found by bracketed root finding on the end position, or the push reaches vmax and
+//!   a cruise phase absorbs the remaining distance. This family contains Ruckig's
+//!   UDDU/UDUD profiles for rest targets, including those whose acceleration never
+//!   crosses zero in the interior.
+//! * [`brake`]: when |v0 + a0|a0|/(2 jmax)| > vmax the velocity limit will be crossed
+//!   whatever the jerk, so a brake pre-phase (−jmax, then −amax) first brings the
+//!   motion back under vmax, as Ruckig does.
+//! * [`stretch`]: the same motion finishing exactly at a longer duration T: ramp to a
+//!   lower peak velocity vp, cruise, ramp down; vp solves the distance equation.
+
+pub mod brake;
+pub mod from_state;
+pub mod rest_to_rest;
+pub mod stretch;
+pub mod velocity;
+
+pub use crate::piecewise::{Kin, Phase, Phases};
+
+/// Limits of one joint for soft motion (all > 0, finite).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits1 {
+    /// vmax (rad/s).
+    pub v: f64,
+    /// amax (rad/s²).
+    pub a: f64,
+    /// jmax (rad/s³).
+    pub j: f64,
+}
+
+/// Stop-velocity: the velocity reached when the acceleration is brought to zero as
+/// fast as the jerk limit allows, v + a|a|/(2 jmax).
+#[inline]
+pub fn stop_velocity(v: f64, a: f64, j: f64) -> f64 {
+    v + a * a.abs() / (2.0 * j)
+}
+
+/// Bracketed root of `f` on [lo, hi] (Illinois variant of regula falsi), assuming
+/// f(lo) ≤ 0 ≤ f(hi) or the reverse. Returns the best point after convergence to
+/// machine precision or 100 iterations.
+pub(crate) fn solve(mut f: impl FnMut(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
+    let mut flo = f(lo);
+    let mut fhi = f(hi);
+    if flo == 0.0 {
+        return lo;
+    }
+    if fhi == 0.0 {
+        return hi;
+    }
+    if flo.signum() == fhi.signum() {
+        return if flo.abs() < fhi.abs() { lo } else { hi };
+    }
+    let mut side = 0i8;
+    for _ in 0..100 {
+        let mut x = (lo * fhi - hi * flo) / (fhi - flo);
+        if !(x > lo && x < hi) {
+            x = 0.5 * (lo + hi);
+        }
+        let fx = f(x);
+        if fx == 0.0 {
+            return x;
+        }
+        if fx.signum() == flo.signum() {
+            lo = x;
+            flo = fx;
+            if side == -1 {
+                fhi *= 0.5;
+            }
+            side = -1;
+        } else {
+            hi = x;
+            fhi = fx;
+            if side == 1 {
+                flo *= 0.5;
+            }
+            side = 1;
+        }
+        if hi - lo <= 4.0 * f64::EPSILON * hi.abs().max(lo.abs()).max(f64::MIN_POSITIVE) {
+            break;
+        }
+    }
+    if flo.abs() < fhi.abs() { lo } else { hi }
+}

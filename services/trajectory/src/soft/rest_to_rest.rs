@@ -1,0 +1,92 @@
+//! Rest-to-rest soft motion in closed form (seed section 3.2.4, with the DESIGN.md
+//! errata): total time 4Tj + 2Ta + Tv.
+//!
+//! Seed case 1 (D ≥ Dthr1): vmax and amax reached, cruise Tv > 0. Case 2
+//! (Dthr1 > D ≥ Dthr2): amax reached, no cruise, Ta = √(A²/(4J²) + D/A) − 3A/(2J)
+//! (here written as the peak velocity). Case 3 (D < Dthr2): neither limit reached,
+//! Tj = (D/(2J))^(1/3). When vmax < amax²/jmax the peak acceleration is √(vmax·jmax).
+
+use super::velocity::ramp_from_rest;
+use super::{Limits1, Phases, solve};
+
+/// Seed's case number (1, 2, 3) for a distance `d` ≥ 0, with Dthr1, Dthr2.
+pub fn seed_case(d: f64, lim: &Limits1) -> (u8, f64, f64) {
+    let (_, _, d_v) = ramp_from_rest(lim.v, lim);
+    let dthr1 = 2.0 * d_v;
+    let dthr2 = 2.0 * lim.a.powi(3) / (lim.j * lim.j);
+    let case = if d >= dthr1 {
+        1
+    } else if d >= dthr2 {
+        2
+    } else {
+        3
+    };
+    (case, dthr1, dthr2)
+}
+
+/// Peak velocity of the zero-cruise profile covering `d` ≥ 0 (unbounded by vmax).
+fn peak_velocity(d: f64, lim: &Limits1) -> f64 {
+    let (a, j) = (lim.a, lim.j);
+    let vp = (0.25 * d * d * j).cbrt();
+    if vp * j <= a * a {
+        vp
+    } else {
+        0.5 * a * (-a / j + (a * a / (j * j) + 4.0 * d / a).sqrt())
+    }
+}
+
+/// Phases of a symmetric motion: ramp 0 → vp, cruise `tc`, ramp vp → 0.
+fn symmetric(vp: f64, tc: f64, lim: &Limits1) -> Phases {
+    let (t1, t2, _) = ramp_from_rest(vp, lim);
+    let mut ph = Phases::default();
+    ph.push(t1, lim.j);
+    ph.push(t2, 0.0);
+    ph.push(t1, -lim.j);
+    ph.push(tc, 0.0);
+    ph.push(t1, -lim.j);
+    ph.push(t2, 0.0);
+    ph.push(t1, lim.j);
+    ph
+}
+
+/// Time-optimal rest-to-rest phases over a distance `d` ≥ 0.
+pub fn time_optimal(d: f64, lim: &Limits1) -> Phases {
+    if d <= 0.0 {
+        return Phases::default();
+    }
+    let (_, _, half_v) = ramp_from_rest(lim.v, lim);
+    if d >= 2.0 * half_v {
+        symmetric(lim.v, (d - 2.0 * half_v) / lim.v, lim)
+    } else {
+        symmetric(peak_velocity(d, lim).min(lim.v), 0.0, lim)
+    }
+}
+
+/// Rest-to-rest phases over `d` ≥ 0 finishing exactly at `t` (≥ the minimum): the
+/// peak velocity vp solves d = vp·(t − T_ramp(vp)).
+pub fn stretched(d: f64, t: f64, lim: &Limits1) -> Phases {
+    if d <= 0.0 {
+        return Phases::default();
+    }
+    let (a, j) = (lim.a, lim.j);
+    // Acceleration-limited ramps: vp²/A − vp(t − A/J) + d = 0, smaller root.
+    let b = t - a / j;
+    let disc = b * b - 4.0 * d / a;
+    let vp_big = if disc >= 0.0 {
+        0.5 * a * (b - disc.sqrt())
+    } else {
+        f64::NAN
+    };
+    let vp = if vp_big * j >= a * a {
+        vp_big
+    } else {
+        // Jerk-limited ramps: d = vp·t − 2·vp^1.5/√J, increasing up to vp = J t²/9.
+        let hi = (a * a / j).min(j * t * t / 9.0).min(lim.v);
+        let g = |vp: f64| vp * (t - 2.0 * (vp / j).sqrt()) - d;
+        solve(g, d / t, hi)
+    };
+    let vp = vp.min(lim.v);
+    let (t1, t2, _) = ramp_from_rest(vp, lim);
+    // The cruise fills the remaining time exactly, so every joint ends at `t`.
+    symmetric(vp, (t - 2.0 * (2.0 * t1 + t2)).max(0.0), lim)
+}

@@ -1,0 +1,116 @@
+//! Ruckig 0.19.4 online cases: single-joint time-optimal motion from a moving state
+//! (durations and samples) and 6-joint synchronised durations.
+
+mod common;
+use common::*;
+use microrobot_trajectory::Trajectory;
+
+#[test]
+fn single_joint_from_moving_state_matches_ruckig() {
+    let r = load("online_trajectory_reference.json");
+    for (n, c) in r["single"].as_array().expect("single").iter().enumerate() {
+        let lim = limits(&[f(&c["vmax"])], &[f(&c["amax"])], &[f(&c["jmax"])], 1e3);
+        let req = soft_request(
+            &[f(&c["p0"])],
+            &[f(&c["v0"])],
+            &[f(&c["a0"])],
+            &[f(&c["p1"])],
+            lim,
+        );
+        let tr = Trajectory::plan(&req).unwrap_or_else(|e| panic!("case {n}: {e}"));
+        let kind = c["kind"].as_str().expect("kind");
+        assert!(!tr.braked(), "case {n} ({kind}) braked");
+        assert_close(
+            tr.duration(),
+            f(&c["duration_s"]),
+            1e-9,
+            &format!("case {n} ({kind}) duration"),
+        );
+        let (t, q, v, a) = (
+            fs(&c["t_s"]),
+            fs(&c["position"]),
+            fs(&c["velocity"]),
+            fs(&c["acceleration"]),
+        );
+        for k in 0..t.len() {
+            let x = tr.sample(t[k]);
+            assert!(
+                (x.q[0] - q[k]).abs() < 1e-9 * (1.0 + q[k].abs()),
+                "case {n} ({kind}) q at {}: {} vs {}",
+                t[k],
+                x.q[0],
+                q[k]
+            );
+            assert!(
+                (x.qd[0] - v[k]).abs() < 1e-9 * (1.0 + v[k].abs()),
+                "case {n} ({kind}) qd at {}: {} vs {}",
+                t[k],
+                x.qd[0],
+                v[k]
+            );
+            assert!(
+                (x.qdd[0] - a[k]).abs() < 1e-9 * (1.0 + a[k].abs()),
+                "case {n} ({kind}) qdd at {}: {} vs {}",
+                t[k],
+                x.qdd[0],
+                a[k]
+            );
+        }
+        tr.check_limits(&lim, true)
+            .unwrap_or_else(|e| panic!("case {n}: {e}"));
+    }
+}
+
+#[test]
+fn synchronised_six_joints_match_ruckig_durations() {
+    let r = load("online_trajectory_reference.json");
+    for (n, c) in r["synchronized"]
+        .as_array()
+        .expect("synchronized")
+        .iter()
+        .enumerate()
+    {
+        let lim = limits(
+            &fs(&c["vmax"]),
+            &fs(&c["amax"]),
+            &fs(&c["jmax"]),
+            std::f64::consts::PI + 0.5,
+        );
+        let req = soft_request(
+            &fs(&c["p0"]),
+            &fs(&c["v0"]),
+            &fs(&c["a0"]),
+            &fs(&c["p1"]),
+            lim,
+        );
+        let tr = Trajectory::plan(&req).unwrap_or_else(|e| panic!("case {n}: {e}"));
+        assert_close(
+            tr.duration(),
+            f(&c["duration_s"]),
+            1e-9,
+            &format!("case {n} duration"),
+        );
+        // Every joint: limits honoured and the exact end state; the limiting joint
+        // also matches Ruckig's samples (the others are one valid choice among many).
+        tr.check_limits(&lim, true)
+            .unwrap_or_else(|e| panic!("case {n}: {e}"));
+        let p1 = fs(&c["p1"]);
+        let end = tr.sample(tr.duration());
+        for i in 0..6 {
+            assert_close(end.q[i], p1[i], 1e-12, "end q");
+            assert_eq!((end.qd[i], end.qdd[i]), (0.0, 0.0));
+        }
+        let lj = c["limiting_joint"].as_u64().expect("limiting joint") as usize - 1;
+        let t = fs(&c["t_s"]);
+        for (k, &tk) in t.iter().enumerate() {
+            let want = f(&c["position"][k][lj]);
+            assert!(
+                (tr.sample(tk).q[lj] - want).abs() < 1e-9,
+                "case {n} limiting joint q at {tk}"
+            );
+        }
+        for (i, &tmin) in fs(&c["independent_min_durations_s"]).iter().enumerate() {
+            assert!(tr.duration() >= tmin - 1e-9, "case {n} joint {i}");
+        }
+    }
+}
