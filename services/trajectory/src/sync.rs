@@ -74,41 +74,35 @@ pub(crate) fn plan_soft(
         w.t_opt = w.t_brake + w.opt.duration();
         t_sync = t_sync.max(w.t_opt);
     }
-    // Raise T past blocked intervals until every joint can reach it.
+    // Stretch the others; raise T past blocked intervals until every joint reaches it.
+    let mut phases = [Phases::default(); MAX_JOINTS];
     let mut stretches: [Option<Stretch>; MAX_JOINTS] = [None; MAX_JOINTS];
     let eps = |t: f64| 1e-12 * t.max(1.0);
-    for _ in 0..=dof {
-        let mut changed = false;
+    for _ in 0..=dof + 1 {
+        let mut raise = t_sync;
         for i in 0..dof {
             let w = &work[i];
+            let lim = limits1(limits, i);
+            phases[i] = w.brake;
             if t_sync - w.t_opt <= eps(t_sync) {
+                phases[i].extend(&w.opt);
                 continue;
             }
-            let lim = limits1(limits, i);
             let st = *stretches[i].get_or_insert_with(|| {
                 Stretch::new(w.after.v, w.after.a, target_q[i] - w.after.p, &lim)
             });
-            let floor = w.t_brake + st.floor();
-            if floor > t_sync + eps(t_sync) {
-                t_sync = floor;
-                changed = true;
+            match st.phases(t_sync - w.t_brake, &lim) {
+                Some(ph) => phases[i].extend(&ph),
+                None => raise = raise.max(w.t_brake + st.guaranteed()),
             }
         }
-        if !changed {
+        if raise <= t_sync {
             break;
         }
+        t_sync = raise;
     }
     let mut joints = [Piecewise::hold(0.0); MAX_JOINTS];
     for i in 0..dof {
-        let w = &work[i];
-        let lim = limits1(limits, i);
-        let mut ph = w.brake;
-        match stretches[i] {
-            Some(st) if t_sync - w.t_opt > eps(t_sync) => {
-                ph.extend(&st.phases(t_sync - w.t_brake, &lim));
-            }
-            _ => ph.extend(&w.opt),
-        }
         let k0 = Kin {
             p: start.q[i],
             v: start.qd[i],
@@ -119,7 +113,7 @@ pub(crate) fn plan_soft(
             v: 0.0,
             a: 0.0,
         };
-        joints[i] = Piecewise::from_phases(k0, &ph, Some(fin));
+        joints[i] = Piecewise::from_phases(k0, &phases[i], Some(fin));
     }
     SoftPlan {
         joints,

@@ -13,7 +13,7 @@ use super::velocity::velocity_change;
 use super::{Kin, Limits1, Phases, solve, stop_velocity};
 
 /// The push duration after which the stop velocity reaches vmax (positive frame).
-pub(crate) fn tau_max(v0: f64, a0: f64, lim: &Limits1) -> f64 {
+pub fn tau_max(v0: f64, a0: f64, lim: &Limits1) -> f64 {
     let (vm, am, jm) = (lim.v, lim.a, lim.j);
     let s0 = stop_velocity(v0, a0, jm);
     if s0 >= vm {
@@ -41,7 +41,7 @@ fn push(a0: f64, tau: f64, lim: &Limits1) -> Phases {
 
 /// Push τ then stop: the whole profile (positive frame).
 #[inline]
-fn push_then_stop(v0: f64, a0: f64, tau: f64, lim: &Limits1) -> (Phases, f64) {
+pub fn push_then_stop(v0: f64, a0: f64, tau: f64, lim: &Limits1) -> (Phases, f64) {
     let start = Kin {
         p: 0.0,
         v: v0,

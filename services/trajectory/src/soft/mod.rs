@@ -45,7 +45,7 @@ pub fn stop_velocity(v: f64, a: f64, j: f64) -> f64 {
 
 /// Bracketed root of `f` on [lo, hi] (Illinois variant of regula falsi), assuming
 /// f(lo) ≤ 0 ≤ f(hi) or the reverse. Returns the best point after convergence to
-/// machine precision or 100 iterations.
+/// machine precision or 200 iterations.
 pub(crate) fn solve(mut f: impl FnMut(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
     let mut flo = f(lo);
     let mut fhi = f(hi);
@@ -59,8 +59,18 @@ pub(crate) fn solve(mut f: impl FnMut(f64) -> f64, mut lo: f64, mut hi: f64) -> 
         return if flo.abs() < fhi.abs() { lo } else { hi };
     }
     let mut side = 0i8;
-    for _ in 0..100 {
-        let mut x = (lo * fhi - hi * flo) / (fhi - flo);
+    let mut width = hi - lo;
+    for it in 0..200 {
+        // Illinois steps, with a bisection whenever three of them failed to halve
+        // the bracket (flat stretches and kinks of piecewise profiles).
+        let mut x = if it % 3 == 2 && hi - lo > 0.5 * width {
+            0.5 * (lo + hi)
+        } else {
+            (lo * fhi - hi * flo) / (fhi - flo)
+        };
+        if it % 3 == 2 {
+            width = hi - lo;
+        }
         if !(x > lo && x < hi) {
             x = 0.5 * (lo + hi);
         }

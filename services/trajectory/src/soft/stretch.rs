@@ -3,16 +3,17 @@
 //!
 //! Family: velocity change (v0, a0) → (vp, 0), cruise at vp, symmetric ramp vp → 0.
 //! For a given T the cruise takes what the ramps leave, and vp solves the distance
-//! equation D1(vp) + vp·Tc + D2(vp) = d — a bracketed root between vp = 0 (stop,
-//! wait, nothing more) and the family's fastest member. From rest, and whenever the
-//! optimal motion's acceleration crosses zero at its velocity peak, that fastest
-//! member *is* the time-optimal motion; otherwise (a start that is decelerating
-//! towards a target just beyond the brake point) the family starts a little later
-//! and durations in between are reported as blocked, like Ruckig's blocked intervals.
+//! equation D1(vp) + vp·Tc + D2(vp) = d, a bracketed root. From rest, and whenever
+//! the optimal motion's acceleration crosses zero at its velocity peak, the family's
+//! fastest member *is* the time-optimal motion. Where the family has no member of
+//! the requested duration, "stop, then a rest-to-rest move" covers every duration from
+//! [`Stretch::guaranteed`] on; durations in between are reported as blocked (`None`),
+//! and synchronisation moves on to a duration every joint reaches, as Ruckig's time
+//! synchronisation does with its blocked intervals.
 
 use super::from_state::brake_point;
 use super::velocity::{ramp_from_rest, velocity_change};
-use super::{Kin, Limits1, Phases, rest_to_rest, solve};
+use super::{Kin, Limits1, Phases, rest_to_rest, solve, stop_velocity};
 
 /// Prepared stretch problem for one joint (positive frame).
 #[derive(Debug, Clone, Copy)]
@@ -21,8 +22,12 @@ pub struct Stretch {
     v0: f64,
     a0: f64,
     d: f64,
+    /// Upper anchor of the peak-velocity search (vmax, or the zero-cruise vp).
     vp_hi: f64,
-    floor: f64,
+    /// Duration of the fastest stop, and of the fastest rest-to-rest move from the
+    /// stop point to the target: the fallback "stop, then move" needs their sum.
+    t_stop: f64,
+    t_r2r: f64,
     rest: bool,
 }
 
@@ -30,35 +35,31 @@ impl Stretch {
     /// Prepares stretching the motion (v0, a0) → rest at displacement `d`.
     pub fn new(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Self {
         if v0 == 0.0 && a0 == 0.0 {
-            let floor = rest_to_rest::time_optimal(d.abs(), lim).duration();
+            let t_r2r = rest_to_rest::time_optimal(d.abs(), lim).duration();
             return Self {
                 sg: if d >= 0.0 { 1.0 } else { -1.0 },
                 v0,
                 a0,
                 d: d.abs(),
                 vp_hi: lim.v,
-                floor,
+                t_stop: 0.0,
+                t_r2r,
                 rest: true,
             };
         }
-        let sg = if d >= brake_point(v0, a0, lim) {
-            1.0
-        } else {
-            -1.0
-        };
+        let pb = brake_point(v0, a0, lim);
+        let sg = if d >= pb { 1.0 } else { -1.0 };
         let (v, a, dd) = (sg * v0, sg * a0, sg * d);
         let dist = |vp: f64| {
             let r1 = velocity_change(v, a, vp, lim);
             let k = r1.integrate(Kin { p: 0.0, v, a });
-            let (t1, t2, d2) = ramp_from_rest(vp, lim);
-            (k.p + d2, r1.duration() + 2.0 * t1 + t2)
+            let (_, _, d2) = ramp_from_rest(vp, lim);
+            k.p + d2
         };
-        let (d_v, t_v) = dist(lim.v);
-        let (vp_hi, floor) = if dd >= d_v {
-            (lim.v, t_v + (dd - d_v) / lim.v)
+        let vp_hi = if dd >= dist(lim.v) {
+            lim.v
         } else {
-            let vz = solve(|vp| dist(vp).0 - dd, 0.0, lim.v);
-            (vz, dist(vz).1)
+            solve(|vp| dist(vp) - dd, 0.0, lim.v)
         };
         Self {
             sg,
@@ -66,46 +67,133 @@ impl Stretch {
             a0: a,
             d: dd,
             vp_hi,
-            floor,
+            t_stop: velocity_change(v, a, 0.0, lim).duration(),
+            t_r2r: rest_to_rest::time_optimal((d - pb).abs(), lim).duration(),
             rest: false,
         }
     }
 
-    /// Shortest duration this family reaches; every T ≥ floor is reachable.
-    pub fn floor(&self) -> f64 {
-        self.floor
+    /// A duration from which on every longer one is reachable (stop, then a
+    /// rest-to-rest move); shorter ones down to the minimum usually are too.
+    pub fn guaranteed(&self) -> f64 {
+        self.t_stop + self.t_r2r
     }
 
-    /// Phases (original frame) finishing at exactly `t` ≥ floor (clamped up to it).
-    pub fn phases(&self, t: f64, lim: &Limits1) -> Phases {
-        let t = t.max(self.floor);
+    /// Phases (original frame) finishing at exactly `t`, or `None` when this family
+    /// has no member of that duration (t below the minimum, or in a blocked interval).
+    ///
+    /// Search: f(vp) = D1 + D2 + vp·Tc − d on peak velocities where the cruise Tc ≥ 0,
+    /// from the upper anchor down: first between the stop velocity and the anchor
+    /// (where Tc is monotone), then on a 16-point grid; last resort "stop, then move".
+    pub fn phases(&self, t: f64, lim: &Limits1) -> Option<Phases> {
         let mut ph = if self.rest {
+            if t < self.t_r2r * (1.0 - 1e-12) {
+                return None;
+            }
             rest_to_rest::stretched(self.d, t, lim)
         } else {
-            let (v, a, dd) = (self.v0, self.a0, self.d);
-            let f = |vp: f64| {
-                let r1 = velocity_change(v, a, vp, lim);
-                let k = r1.integrate(Kin { p: 0.0, v, a });
-                let (t1, t2, d2) = ramp_from_rest(vp, lim);
-                let tc = t - r1.duration() - 2.0 * t1 - t2;
-                if tc < 0.0 {
-                    tc - 1.0 - dd.abs()
-                } else {
-                    k.p + d2 + vp * tc - dd
-                }
-            };
-            let vp = solve(f, 0.0, self.vp_hi);
-            let mut ph = velocity_change(v, a, vp, lim);
-            let (t1, t2, _) = ramp_from_rest(vp, lim);
-            ph.push((t - ph.duration() - 2.0 * t1 - t2).max(0.0), 0.0);
-            ph.push(t1, -lim.j);
-            ph.push(t2, 0.0);
-            ph.push(t1, lim.j);
-            ph
+            self.search(t, lim)
+                .or_else(|| self.stop_then_move(t, lim))?
         };
         for p in &mut ph.p[..ph.n] {
             p.j *= self.sg;
         }
-        ph
+        Some(ph)
+    }
+
+    /// f(vp) and validity (cruise ≥ 0).
+    #[inline]
+    fn f(&self, vp: f64, t: f64, lim: &Limits1) -> (f64, bool) {
+        let (v, a) = (self.v0, self.a0);
+        let r1 = velocity_change(v, a, vp, lim);
+        let k = r1.integrate(Kin { p: 0.0, v, a });
+        let (t1, t2, d2) = ramp_from_rest(vp, lim);
+        let tc = t - r1.duration() - 2.0 * t1 - t2;
+        // Round-off at the family's fastest member must not look infeasible.
+        let tc = if tc > -1e-12 * t.max(1.0) {
+            tc.max(0.0)
+        } else {
+            tc
+        };
+        (k.p + d2 + vp * tc - self.d, tc >= 0.0)
+    }
+
+    fn search(&self, t: f64, lim: &Limits1) -> Option<Phases> {
+        let u = self.vp_hi;
+        let (fu, ok_u) = self.f(u, t, lim);
+        let mut bracket = None;
+        if ok_u && fu >= 0.0 {
+            let m = stop_velocity(self.v0, self.a0, lim.j).clamp(0.0, u);
+            let (fm, ok_m) = self.f(m, t, lim);
+            if ok_m && fm <= 0.0 {
+                bracket = Some((m, u));
+            }
+        }
+        if bracket.is_none() {
+            const N: usize = 16;
+            let mut prev: Option<(f64, f64)> = ok_u.then_some((u, fu));
+            for k in (0..N).rev() {
+                let x = u * k as f64 / N as f64;
+                let (fx, ok) = self.f(x, t, lim);
+                if !ok {
+                    prev = None;
+                    continue;
+                }
+                if let Some((xp, fp)) = prev
+                    && fp >= 0.0
+                    && fx <= 0.0
+                {
+                    bracket = Some((x, xp));
+                    break;
+                }
+                prev = Some((x, fx));
+            }
+        }
+        let (lo, hi) = bracket?;
+        let vp = solve(
+            |vp| {
+                let (fx, ok) = self.f(vp, t, lim);
+                if ok { fx } else { -1.0 - self.d.abs() }
+            },
+            lo,
+            hi,
+        );
+        let (fx, ok) = self.f(vp, t, lim);
+        if !ok || fx.abs() > 1e-9 * (1.0 + self.d.abs()) {
+            return None;
+        }
+        let mut ph = velocity_change(self.v0, self.a0, vp, lim);
+        let (t1, t2, _) = ramp_from_rest(vp, lim);
+        ph.push((t - ph.duration() - 2.0 * t1 - t2).max(0.0), 0.0);
+        ph.push(t1, -lim.j);
+        ph.push(t2, 0.0);
+        ph.push(t1, lim.j);
+        Some(ph)
+    }
+
+    /// Fastest stop, then a rest-to-rest move taking the remaining time.
+    fn stop_then_move(&self, t: f64, lim: &Limits1) -> Option<Phases> {
+        if t < self.guaranteed() * (1.0 - 1e-12) {
+            return None;
+        }
+        let stop = velocity_change(self.v0, self.a0, 0.0, lim);
+        let pb = stop
+            .integrate(Kin {
+                p: 0.0,
+                v: self.v0,
+                a: self.a0,
+            })
+            .p;
+        let mut ph = stop;
+        let mv = rest_to_rest::stretched(
+            (self.d - pb).abs(),
+            (t - stop.duration()).max(self.t_r2r),
+            lim,
+        );
+        let s = if self.d >= pb { 1.0 } else { -1.0 };
+        for p in &mv.p[..mv.n] {
+            ph.push(p.t, s * p.j);
+        }
+        Some(ph)
     }
 }
