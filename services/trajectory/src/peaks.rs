@@ -95,12 +95,5 @@ pub(crate) fn extremes(pw: &Piecewise) -> [f64; 5] {
 
 /// Position range only (cheap: used on every plan for the position-limit check).
 pub(crate) fn position_range(pw: &Piecewise) -> (f64, f64) {
-    let fin = pw.final_state();
-    let (mut lo, mut hi) = (fin.p, fin.p);
-    for (t0, t1, c) in pw.pieces() {
-        let (a, b) = range(c, t1 - t0);
-        lo = lo.min(a);
-        hi = hi.max(b);
-    }
-    (lo, hi)
+    pw.position_range(range)
 }

@@ -4,8 +4,8 @@
 //! constant-jerk phases of soft motion — is stored the same way, so sampling is one
 //! short scan and one Horner evaluation, with no allocation.
 
-/// Most pieces one joint's motion can have (brake 2 + ramp 3 + cruise 1 + ramp 3).
-pub const MAX_PHASES: usize = 10;
+/// Most pieces one joint's motion can have (brake 2 + stop 3 + rest-to-rest 7).
+pub const MAX_PHASES: usize = 12;
 
 /// A constant-jerk phase: duration and jerk.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -90,6 +90,8 @@ impl Kin {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Piecewise {
     n: usize,
+    /// Any piece of degree > 3 (quintic); otherwise sampling skips c4, c5.
+    quintic: bool,
     /// End time of each piece (cumulative from 0).
     end: [f64; MAX_PHASES],
     /// Coefficients c0..c5 of q(τ) = Σ cᵢ τⁱ, τ = local time in the piece.
@@ -103,6 +105,7 @@ impl Piecewise {
     pub fn hold(p: f64) -> Self {
         Self {
             n: 0,
+            quintic: false,
             end: [0.0; MAX_PHASES],
             c: [[0.0; 6]; MAX_PHASES],
             fin: Kin { p, v: 0.0, a: 0.0 },
@@ -131,6 +134,7 @@ impl Piecewise {
     pub fn polynomial(t: f64, c: [f64; 6], fin: Kin) -> Self {
         let mut out = Self::hold(fin.p);
         out.n = 1;
+        out.quintic = c[4] != 0.0 || c[5] != 0.0;
         out.end[0] = t;
         out.c[0] = c;
         out.fin = fin;
@@ -156,6 +160,36 @@ impl Piecewise {
         } else {
             self.end[self.n - 1]
         }
+    }
+
+    /// Position range [min, max] over the whole motion. Piece ends are the next
+    /// piece's c0; a piece only needs its interior looked at when its velocity
+    /// changes sign inside it.
+    pub fn position_range(&self, interior: impl Fn(&[f64; 6], f64) -> (f64, f64)) -> (f64, f64) {
+        let (mut lo, mut hi) = (self.fin.p, self.fin.p);
+        for i in 0..self.n {
+            let c = &self.c[i];
+            lo = lo.min(c[0]);
+            hi = hi.max(c[0]);
+            let len = self.end[i] - if i == 0 { 0.0 } else { self.end[i - 1] };
+            let monotone = !self.quintic && {
+                let v_end = c[1] + len * (2.0 * c[2] + len * 3.0 * c[3]);
+                let mut same = c[1] * v_end > 0.0;
+                if same && c[3] != 0.0 {
+                    let x = -c[2] / (3.0 * c[3]);
+                    if x > 0.0 && x < len {
+                        same = c[1] * (c[1] + x * (2.0 * c[2] + x * 3.0 * c[3])) > 0.0;
+                    }
+                }
+                same
+            };
+            if !monotone {
+                let (a, b) = interior(c, len);
+                lo = lo.min(a);
+                hi = hi.max(b);
+            }
+        }
+        (lo, hi)
     }
 
     /// Final state.
@@ -184,6 +218,12 @@ impl Piecewise {
         let t0 = if i == 0 { 0.0 } else { self.end[i - 1] };
         let x = (t - t0).max(0.0);
         let c = &self.c[i];
+        if !self.quintic {
+            let q = c[0] + x * (c[1] + x * (c[2] + x * c[3]));
+            let qd = c[1] + x * (2.0 * c[2] + x * 3.0 * c[3]);
+            let qdd = 2.0 * c[2] + x * 6.0 * c[3];
+            return [q, qd, qdd, 6.0 * c[3]];
+        }
         let q = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
         let qd = c[1] + x * (2.0 * c[2] + x * (3.0 * c[3] + x * (4.0 * c[4] + x * 5.0 * c[5])));
         let qdd = 2.0 * c[2] + x * (6.0 * c[3] + x * (12.0 * c[4] + x * 20.0 * c[5]));

@@ -46,7 +46,12 @@ pub fn stop_velocity(v: f64, a: f64, j: f64) -> f64 {
 /// Bracketed root of `f` on [lo, hi] (Illinois variant of regula falsi), assuming
 /// f(lo) ≤ 0 ≤ f(hi) or the reverse. Returns the best point after convergence to
 /// machine precision or 200 iterations.
-pub(crate) fn solve(mut f: impl FnMut(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
+pub(crate) fn solve(f: impl FnMut(f64) -> f64, lo: f64, hi: f64) -> f64 {
+    solve_tol(f, lo, hi, 0.0)
+}
+
+/// [`solve`], also stopping once |f| ≤ `ftol`.
+pub(crate) fn solve_tol(mut f: impl FnMut(f64) -> f64, mut lo: f64, mut hi: f64, ftol: f64) -> f64 {
     let mut flo = f(lo);
     let mut fhi = f(hi);
     if flo == 0.0 {
@@ -75,7 +80,7 @@ pub(crate) fn solve(mut f: impl FnMut(f64) -> f64, mut lo: f64, mut hi: f64) -> 
             x = 0.5 * (lo + hi);
         }
         let fx = f(x);
-        if fx == 0.0 {
+        if fx.abs() <= ftol {
             return x;
         }
         if fx.signum() == flo.signum() {

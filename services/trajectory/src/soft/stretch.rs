@@ -13,7 +13,7 @@
 
 use super::from_state::brake_point;
 use super::velocity::{ramp_from_rest, velocity_change};
-use super::{Kin, Limits1, Phases, rest_to_rest, solve, stop_velocity};
+use super::{Kin, Limits1, Phases, rest_to_rest, solve_tol, stop_velocity};
 
 /// Prepared stretch problem for one joint (positive frame).
 #[derive(Debug, Clone, Copy)]
@@ -59,7 +59,7 @@ impl Stretch {
         let vp_hi = if dd >= dist(lim.v) {
             lim.v
         } else {
-            solve(|vp| dist(vp) - dd, 0.0, lim.v)
+            solve_tol(|vp| dist(vp) - dd, 0.0, lim.v, 1e-14 * (1.0 + dd.abs()))
         };
         Self {
             sg,
@@ -150,13 +150,14 @@ impl Stretch {
             }
         }
         let (lo, hi) = bracket?;
-        let vp = solve(
+        let vp = solve_tol(
             |vp| {
                 let (fx, ok) = self.f(vp, t, lim);
                 if ok { fx } else { -1.0 - self.d.abs() }
             },
             lo,
             hi,
+            1e-14 * (1.0 + self.d.abs()),
         );
         let (fx, ok) = self.f(vp, t, lim);
         if !ok || fx.abs() > 1e-9 * (1.0 + self.d.abs()) {
