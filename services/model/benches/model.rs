@@ -1,6 +1,7 @@
 //! Criterion benchmarks of the hot-path algorithms on the seed arm
 //! (`config/robots/seed-arm.toml`) at random states inside its limits.
 //! Run: `cargo bench -p microrobot-model --bench model`.
+#![allow(clippy::needless_range_loop)] // index loops read like the matrix formulas
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use microrobot_model::{

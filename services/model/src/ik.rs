@@ -238,6 +238,11 @@ fn attempt_solve(
     update_kinematics(robot, data, &q);
     let (mut e, mut pos_err, mut ori_err) = task_error(data, target, weight);
     let mut lambda = options.initial_damping;
+    let mut revolute_full_turn = [false; crate::MAX_JOINTS];
+    for (i, j) in robot.joints().iter().enumerate() {
+        revolute_full_turn[i] = j.kind == crate::JointKind::Revolute
+            && j.limits.max - j.limits.min >= 2.0 * std::f64::consts::PI - 1e-9;
+    }
     let mut iterations = 0;
     let converged =
         |p: f64, o: f64| p < options.position_tolerance_m && o < options.orientation_tolerance_rad;
@@ -251,6 +256,18 @@ fn attempt_solve(
         }
         if rows == 3 {
             jac.fixed_rows_mut::<3>(3).fill(0.0);
+        }
+        // Joints resting on a limit and pushed outwards are locked for this
+        // iteration (a one-step active set), so the others take up the motion.
+        {
+            let e_dir = jac.transpose() * e;
+            for i in 0..n {
+                let at_min = q[i] <= limits[i].min && e_dir[i] < 0.0;
+                let at_max = q[i] >= limits[i].max && e_dir[i] > 0.0;
+                if (at_min || at_max) && !revolute_full_turn[i] {
+                    jac.column_mut(i).fill(0.0);
+                }
+            }
         }
         let jjt: Matrix6<f64> = jac * jac.transpose();
         let mut accepted = false;
@@ -268,10 +285,7 @@ fn attempt_solve(
             };
             let y = chol.solve(&e);
             let dq = jac.transpose() * y;
-            let mut q_new = q;
-            for i in 0..n {
-                q_new[i] = limits[i].clamp(q[i] + dq[i]);
-            }
+            let q_new = step_within_limits(&q, &dq, n, limits, &revolute_full_turn);
             update_kinematics(robot, data, &q_new);
             let (e_new, p_new, o_new) = task_error(data, target, weight);
             if e_new.norm() < e.norm() {
@@ -299,4 +313,31 @@ fn attempt_solve(
         position_error_m: pos_err,
         orientation_error_rad: ori_err,
     }
+}
+
+/// `q + dq` kept inside the limits: clamped, except that a revolute joint whose
+/// range spans a full turn wraps around (`q ± 2π`) instead of stopping at the
+/// end of its range.
+fn step_within_limits(
+    q: &JointVector,
+    dq: &JointVector,
+    n: usize,
+    limits: &[crate::JointLimits],
+    revolute_full_turn: &[bool; crate::MAX_JOINTS],
+) -> JointVector {
+    let tau = 2.0 * std::f64::consts::PI;
+    let mut out = *q;
+    for i in 0..n {
+        let mut v = q[i] + dq[i];
+        let l = &limits[i];
+        if revolute_full_turn[i] && v.is_finite() {
+            if v > l.max {
+                v -= tau * ((v - l.max) / tau).ceil();
+            } else if v < l.min {
+                v += tau * ((l.min - v) / tau).ceil();
+            }
+        }
+        out[i] = l.clamp(v);
+    }
+    out
 }

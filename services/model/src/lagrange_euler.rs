@@ -95,9 +95,10 @@ impl Chain {
             pseudo[j] = pseudo_inertia(b.mass, &b.com, &b.inertia_com);
         }
         let mut span = [[Mat4::identity(); MAX_JOINTS + 1]; MAX_JOINTS + 1];
-        for a in 0..=n {
+        for (a, row) in span.iter_mut().enumerate().take(n + 1) {
             for b in (a + 1)..=n {
-                span[a][b] = span[a][b - 1] * local[b - 1];
+                // ᵃT_b = ᵃT_{b-1} A_b; ᵃT_a stays the identity.
+                row[b] = row[b - 1] * local[b - 1];
             }
         }
         Chain {

@@ -91,17 +91,15 @@ impl Pose {
 /// libm calls. Larger or non-finite arguments fall back to [`f64::sin_cos`].
 #[inline]
 pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
-    // `!(a < b)` also routes NaN to the fallback.
-    if !(x.abs() < 1.0e5) {
+    if x.is_nan() || x.abs() >= 1.0e5 {
         return x.sin_cos();
     }
-    const TWO_OVER_PI: f64 = 6.366_197_723_675_813_8e-1;
     const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
     // π/2 split in 33-bit pieces: k · PIO2_1 and k · PIO2_2 are exact for |k| < 2^20.
-    const PIO2_1: f64 = 1.570_796_326_734_125_6e0;
-    const PIO2_2: f64 = 6.077_100_506_303_966e-11;
-    const PIO2_3: f64 = 2.022_266_248_711_166_5e-21;
-    let k = (x * TWO_OVER_PI + ROUND_MAGIC) - ROUND_MAGIC;
+    const PIO2_1: f64 = 1.5707963267341256;
+    const PIO2_2: f64 = 6.077100506303966e-11;
+    const PIO2_3: f64 = 2.0222662487111665e-21;
+    let k = (x * std::f64::consts::FRAC_2_PI + ROUND_MAGIC) - ROUND_MAGIC;
     let r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_3;
     let (s, c) = sin_cos_kernel(r);
     match (k as i64) & 3 {
@@ -115,18 +113,18 @@ pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
 /// sin and cos on `[-π/4, π/4]` (fdlibm `__kernel_sin` / `__kernel_cos` coefficients).
 #[inline]
 fn sin_cos_kernel(r: f64) -> (f64, f64) {
-    const S1: f64 = -1.666_666_666_666_663_2e-1;
-    const S2: f64 = 8.333_333_333_322_49e-3;
-    const S3: f64 = -1.984_126_982_985_795e-4;
-    const S4: f64 = 2.755_731_370_707_006_8e-6;
-    const S5: f64 = -2.505_076_025_340_686_3e-8;
-    const S6: f64 = 1.589_690_995_211_55e-10;
-    const C1: f64 = 4.166_666_666_666_660_2e-2;
-    const C2: f64 = -1.388_888_888_887_411e-3;
-    const C3: f64 = 2.480_158_728_947_673e-5;
-    const C4: f64 = -2.755_731_435_139_066_3e-7;
-    const C5: f64 = 2.087_572_321_298_175e-9;
-    const C6: f64 = -1.135_964_755_778_819_5e-11;
+    const S1: f64 = -0.16666666666666632;
+    const S2: f64 = 0.00833333333332249;
+    const S3: f64 = -0.0001984126982985795;
+    const S4: f64 = 2.7557313707070068e-06;
+    const S5: f64 = -2.5050760253406863e-08;
+    const S6: f64 = 1.58969099521155e-10;
+    const C1: f64 = 0.0416666666666666;
+    const C2: f64 = -0.001388888888887411;
+    const C3: f64 = 2.480158728947673e-05;
+    const C4: f64 = -2.7557314351390663e-07;
+    const C5: f64 = 2.087572321298175e-09;
+    const C6: f64 = -1.1359647557788195e-11;
     let z = r * r;
     let s = r + r * z * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6)))));
     let pc = z * z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6)))));

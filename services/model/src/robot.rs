@@ -277,10 +277,8 @@ impl Robot {
                 coulomb: j.coulomb_friction,
             };
             let mut link = j.link;
-            if i == dof - 1 {
-                if let Some(p) = &payload {
-                    link = link.combined(&p.transformed(&tool));
-                }
+            if let (true, Some(p)) = (i == dof - 1, &payload) {
+                link = link.combined(&p.transformed(&tool));
             }
             bodies[i] = Body::from_link(&link);
         }

@@ -147,7 +147,7 @@ fn uniform(seed: u64, sample: u64, joint: u64) -> f64 {
 
 fn cell(x: f64, h: f64) -> Option<u64> {
     let i = (x / h).floor();
-    if !(i.abs() < (AXIS_OFFSET - 1) as f64) {
+    if i.is_nan() || i.abs() >= (AXIS_OFFSET - 1) as f64 {
         return None;
     }
     Some((i as i64 + AXIS_OFFSET) as u64)

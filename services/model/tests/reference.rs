@@ -2,6 +2,7 @@
 //! by Pinocchio and cross-checked with the Robotics Toolbox): every quantity, both
 //! dynamics paths, 1e-9 relative with a 1e-12 absolute floor; and the parsed
 //! `config/robots/seed-arm.toml` against the reference's `model` parameters.
+#![allow(clippy::needless_range_loop)] // index loops read like the matrix formulas
 
 use microrobot_model::{
     JointVector, MassMatrix, ModelData, Robot, coriolis_torque, gravity_torque, jacobian,

@@ -85,8 +85,7 @@ pub fn try_forward_dynamics(
         for k in 0..j {
             diag -= l[(j, k)] * l[(j, k)];
         }
-        // `!(diag > tiny)` also catches NaN.
-        if !(diag > tiny) || tiny == 0.0 {
+        if diag.is_nan() || diag <= tiny || tiny == 0.0 {
             return Err(DynamicsError::SingularMassMatrix {
                 joint: j,
                 pivot: diag,
