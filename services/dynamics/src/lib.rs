@@ -1,1 +1,373 @@
-//! placeholder
+//! The dynamics service: woken by each joint setpoint, it computes the joint torques
+//! and publishes a torque command.
+//!
+//! * Feedback on (default), computed torque on the measured state (q, q̇):
+//!   `τ = M(q)(q̈d + Kp(qd − q) + Kd(q̇d − q̇)) + h(q, q̇)` with Kp in 1/s², Kd in 1/s.
+//! * Feedback off, or measured state stale: feed-forward Newton-Euler
+//!   `τ = rnea(qd, q̇d, q̈d)`, flagged `STATE_STALE` when feedback was wanted.
+//! * Every τ is clamped to the joint's effort limit and flagged `CLAMPED`.
+//!
+//! In lockstep, setpoint k uses exactly measured state k−1 (the state the actuator
+//! published after applying torque k−1); otherwise the newest state younger than
+//! `stale_ms`. Inputs are validated (finite, dof, increasing seq, fresh, within the
+//! joint limits) and refused ones are counted; no torque is published for them.
+//! The computation lives in [`DynamicsCore`] (no IPC).
+
+use iceoryx2::prelude::*;
+use microrobot_messages::{
+    Header, JointSetpoint, JointState, LifecycleState, MAX_JOINTS, ServiceKind, ServiceRole,
+    ServiceStatus, TorqueCommand, monotonic_ns, open_event, open_publish_subscribe, torque_flags,
+};
+use microrobot_model::{JointVector, ModelData, Robot, mass_matrix, nonlinear_effects, rnea};
+use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::stats::LatencyHistogram;
+use microrobot_runtime::validate::{
+    JointBounds, Refusal, SeqTracker, check_fresh, check_setpoint, check_state,
+};
+use microrobot_runtime::{BadConfig, Shutdown, StatusPort, TimerFd, open_node, waitset};
+
+/// Cumulative counters of the dynamics service.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Counters {
+    /// Torque commands computed.
+    pub cycles: u64,
+    /// Setpoints and states refused.
+    pub refused: u64,
+    /// Torques computed without (wanted) feedback because the state was stale or missing.
+    pub stale_cycles: u64,
+    /// Torques clamped to an effort limit.
+    pub clamped_cycles: u64,
+}
+
+/// The torque computation, independent of IPC and clocks.
+pub struct DynamicsCore {
+    robot: Robot,
+    data: ModelData,
+    dof: usize,
+    feedback: bool,
+    kp: f64,
+    kd: f64,
+    lockstep: bool,
+    stale_ns: u64,
+    effort: [f64; MAX_JOINTS],
+    bounds: JointBounds,
+    sp_seq: SeqTracker,
+    st_seq: SeqTracker,
+    state: Option<JointState>,
+    torque_seq: u64,
+    last_tick_value: Option<u64>,
+    /// Counters for the status.
+    pub counters: Counters,
+    /// Largest |τ| commanded per joint (after clamping).
+    pub peak_torque: [f64; MAX_JOINTS],
+}
+
+impl DynamicsCore {
+    /// A core for `robot` with the `[dynamics]` and watchdog settings of `cfg`.
+    pub fn new(robot: &Robot, cfg: &PipelineConfig) -> Self {
+        let mut effort = [0.0; MAX_JOINTS];
+        let mut bounds = JointBounds {
+            q_min: [0.0; MAX_JOINTS],
+            q_max: [0.0; MAX_JOINTS],
+            qd_max: [0.0; MAX_JOINTS],
+        };
+        for (i, j) in robot.joints().iter().enumerate() {
+            effort[i] = j.limits.effort;
+            bounds.q_min[i] = j.limits.min;
+            bounds.q_max[i] = j.limits.max;
+            bounds.qd_max[i] = j.limits.velocity;
+        }
+        Self {
+            data: ModelData::new(robot),
+            dof: robot.dof(),
+            robot: robot.clone(),
+            feedback: cfg.dynamics.feedback,
+            kp: cfg.dynamics.kp_per_s2,
+            kd: cfg.dynamics.kd_per_s,
+            lockstep: cfg.lockstep,
+            stale_ns: (cfg.watchdog.stale_ms * 1e6) as u64,
+            effort,
+            bounds,
+            sp_seq: SeqTracker::default(),
+            st_seq: SeqTracker::default(),
+            state: None,
+            torque_seq: 0,
+            last_tick_value: None,
+            counters: Counters::default(),
+            peak_torque: [0.0; MAX_JOINTS],
+        }
+    }
+
+    /// Sequence gaps seen on the setpoint and state streams.
+    pub fn lost_messages(&self) -> u64 {
+        self.sp_seq.lost + self.st_seq.lost
+    }
+
+    /// Logical time of the last setpoint (its tick).
+    pub fn last_tick(&self) -> Option<u64> {
+        self.last_tick_value
+    }
+
+    /// Validates a measured state and keeps it as the newest.
+    pub fn accept_state(&mut self, msg: &JointState, publisher: u128) -> Result<(), Refusal> {
+        let r =
+            check_state(msg, self.dof).and_then(|()| self.st_seq.accept(publisher, msg.header.seq));
+        match r {
+            Ok(()) => {
+                self.state = Some(*msg);
+                Ok(())
+            }
+            Err(e) => {
+                self.counters.refused += 1;
+                Err(e)
+            }
+        }
+    }
+
+    /// The state to use for setpoint `sp` at `now_ns`, if fresh enough.
+    fn usable_state(&self, sp: &JointSetpoint, now_ns: u64) -> Option<JointState> {
+        let s = self.state?;
+        if self.lockstep {
+            (s.header.tick + 1 == sp.header.tick).then_some(s)
+        } else {
+            check_fresh(s.header.stamp_ns, now_ns, self.stale_ns)
+                .ok()
+                .map(|()| s)
+        }
+    }
+
+    /// Validates setpoint `sp` (from `publisher`) and computes its torque command
+    /// (stamped `now_ns`). A refused setpoint gives no command.
+    pub fn compute(
+        &mut self,
+        sp: &JointSetpoint,
+        publisher: u128,
+        now_ns: u64,
+    ) -> Result<TorqueCommand, Refusal> {
+        let r = check_setpoint(sp, self.dof, &self.bounds)
+            .and_then(|()| {
+                if self.lockstep {
+                    Ok(())
+                } else {
+                    check_fresh(sp.header.stamp_ns, now_ns, self.stale_ns)
+                }
+            })
+            .and_then(|()| self.sp_seq.accept(publisher, sp.header.seq));
+        if let Err(e) = r {
+            self.counters.refused += 1;
+            return Err(e);
+        }
+        self.last_tick_value = Some(sp.header.tick);
+        let n = self.dof;
+        let qd_ = JointVector::from_column_slice(&sp.q);
+        let vd = JointVector::from_column_slice(&sp.qd);
+        let ad = JointVector::from_column_slice(&sp.qdd);
+        let mut flags = 0;
+        let state = if self.feedback {
+            self.usable_state(sp, now_ns)
+        } else {
+            None
+        };
+        let mut tau = match state {
+            Some(s) => {
+                flags |= torque_flags::FEEDBACK;
+                let q = JointVector::from_column_slice(&s.q);
+                let v = JointVector::from_column_slice(&s.qd);
+                let mut a = JointVector::zeros();
+                for i in 0..n {
+                    a[i] = ad[i] + self.kp * (qd_[i] - q[i]) + self.kd * (vd[i] - v[i]);
+                }
+                let m = mass_matrix(&self.robot, &mut self.data, &q);
+                let h = nonlinear_effects(&self.robot, &mut self.data, &q, &v);
+                m * a + h
+            }
+            None => {
+                if self.feedback {
+                    flags |= torque_flags::STATE_STALE;
+                    self.counters.stale_cycles += 1;
+                }
+                rnea(&self.robot, &mut self.data, &qd_, &vd, &ad)
+            }
+        };
+        let mut clamped = false;
+        for i in 0..n {
+            let lim = self.effort[i];
+            if tau[i] > lim {
+                tau[i] = lim;
+                clamped = true;
+            } else if tau[i] < -lim {
+                tau[i] = -lim;
+                clamped = true;
+            } else if !tau[i].is_finite() {
+                // A singular model at this state: refuse rather than forward garbage.
+                self.counters.refused += 1;
+                return Err(Refusal::NonFinite);
+            }
+        }
+        if clamped {
+            flags |= torque_flags::CLAMPED;
+            self.counters.clamped_cycles += 1;
+        }
+        self.torque_seq += 1;
+        self.counters.cycles += 1;
+        let mut out = TorqueCommand {
+            header: Header {
+                seq: self.torque_seq,
+                tick: sp.header.tick,
+                stamp_ns: now_ns,
+                source_stamp_ns: sp.header.source_stamp_ns,
+            },
+            setpoint_seq: sp.header.seq,
+            state_seq: state.map(|s| s.header.seq).unwrap_or(u64::MAX),
+            dof: n as u32,
+            flags,
+            ..Default::default()
+        };
+        for i in 0..n {
+            out.tau[i] = tau[i];
+            out.q_desired[i] = sp.q[i];
+            self.peak_torque[i] = self.peak_torque[i].max(tau[i].abs());
+        }
+        Ok(out)
+    }
+}
+
+/// The dynamics service (`microrobot service dynamics`).
+pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let robot = microrobot_model::Robot::from_file(&cfg.robot)
+        .map_err(|e| BadConfig(format!("robot file: {e}")))?;
+    let inst = cfg.instance.as_str();
+    let node = open_node(inst, ServiceRole::Dynamics)?;
+    let err = |what: &'static str| move |e: &dyn std::fmt::Debug| anyhow::anyhow!("{what}: {e:?}");
+
+    let sp_sub = open_publish_subscribe::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?
+        .subscriber_builder()
+        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
+        .history_request(0)
+        .create()
+        .map_err(|e| err("setpoint subscriber")(&e))?;
+    let sp_listener = open_event(&node, inst, ServiceKind::Setpoint)?
+        .listener_builder()
+        .create()
+        .map_err(|e| err("setpoint listener")(&e))?;
+    let st_sub = open_publish_subscribe::<JointState>(&node, inst, ServiceKind::State)?
+        .subscriber_builder()
+        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
+        .history_request(1)
+        .create()
+        .map_err(|e| err("state subscriber")(&e))?;
+    let tq_pub = open_publish_subscribe::<TorqueCommand>(&node, inst, ServiceKind::Torque)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| err("torque publisher")(&e))?;
+    let tq_notifier = open_event(&node, inst, ServiceKind::Torque)?
+        .notifier_builder()
+        .create()
+        .map_err(|e| err("torque notifier")(&e))?;
+    let mut status = StatusPort::open(&node, inst, ServiceRole::Dynamics, cfg.status_period_ms)?;
+
+    let mut core = DynamicsCore::new(&robot, cfg);
+    let mut lat = LatencyHistogram::new();
+    let timer = TimerFd::new()?;
+    let sp_ns = status.period_ns();
+    timer.arm_absolute(monotonic_ns() + sp_ns, sp_ns)?;
+
+    let ws = waitset()?;
+    let g_sp = ws
+        .attach_notification(&sp_listener)
+        .map_err(|e| err("waitset")(&e))?;
+    let g_timer = ws
+        .attach_notification(&timer)
+        .map_err(|e| err("waitset")(&e))?;
+    let g_stop = ws
+        .attach_notification(shutdown)
+        .map_err(|e| err("waitset")(&e))?;
+
+    let mut st = ServiceStatus {
+        ready: 1,
+        lifecycle: LifecycleState::Active as u32,
+        ..Default::default()
+    };
+    let fill = |st: &mut ServiceStatus,
+                core: &DynamicsCore,
+                lat: &LatencyHistogram,
+                stale_no_input: u64| {
+        st.cycles = core.counters.cycles;
+        st.lost_messages = core.lost_messages();
+        st.refused_messages = core.counters.refused;
+        st.stale_cycles = core.counters.stale_cycles + stale_no_input;
+        st.clamped_cycles = core.counters.clamped_cycles;
+        st.latency = lat.summary();
+        st.peak_torque = core.peak_torque;
+        st.motion_time_s = core.last_tick().unwrap_or(0) as f64 / cfg.rate_hz;
+    };
+    fill(&mut st, &core, &lat, 0);
+    status.publish(monotonic_ns(), &mut st);
+    let mut last_setpoint_ns = monotonic_ns();
+    let mut input_stale_periods = 0u64;
+
+    while !shutdown.is_requested() {
+        let mut fired = [false; 3];
+        ws.wait_and_process_once(|id| {
+            fired[0] |= id.has_event_from(&g_sp);
+            fired[1] |= id.has_event_from(&g_timer);
+            fired[2] |= id.has_event_from(&g_stop);
+            CallbackProgression::Continue
+        })
+        .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
+        if fired[2] || shutdown.is_requested() {
+            break;
+        }
+        if fired[0] {
+            let _ = sp_listener.try_wait(|_| {});
+            while let Ok(Some(s)) = st_sub.receive() {
+                let msg = *s;
+                let publisher = s.header().publisher_id().value();
+                drop(s);
+                let _ = core.accept_state(&msg, publisher);
+            }
+            while let Ok(Some(s)) = sp_sub.receive() {
+                let msg = *s;
+                let publisher = s.header().publisher_id().value();
+                drop(s);
+                let now = monotonic_ns();
+                last_setpoint_ns = now;
+                if let Ok(mut cmd) = core.compute(&msg, publisher, now) {
+                    cmd.header.stamp_ns = monotonic_ns();
+                    if tq_pub.send_copy(cmd).is_ok() {
+                        let _ = tq_notifier.notify();
+                    }
+                    lat.record(
+                        cmd.header
+                            .stamp_ns
+                            .saturating_sub(msg.header.source_stamp_ns),
+                    );
+                }
+            }
+        }
+        if fired[1] {
+            let _ = timer.read_expirations();
+            // Keep the state queue short even when no setpoint arrives.
+            while let Ok(Some(s)) = st_sub.receive() {
+                let msg = *s;
+                let publisher = s.header().publisher_id().value();
+                drop(s);
+                let _ = core.accept_state(&msg, publisher);
+            }
+            let now = monotonic_ns();
+            if !cfg.lockstep
+                && now.saturating_sub(last_setpoint_ns) > (cfg.watchdog.stale_ms * 1e6) as u64
+            {
+                input_stale_periods += 1;
+            }
+        }
+        let now = monotonic_ns();
+        if status.due(now) {
+            fill(&mut st, &core, &lat, input_stale_periods);
+            status.publish(now, &mut st);
+        }
+    }
+    fill(&mut st, &core, &lat, input_stale_periods);
+    status.publish_final(&mut st);
+    Ok(())
+}

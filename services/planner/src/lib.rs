@@ -1,1 +1,787 @@
-//! placeholder
+//! The planner service: the clock of the pipeline. Every tick it samples the active
+//! motion and publishes one joint setpoint (q, q̇, q̈, jerk).
+//!
+//! * Clock: its own timerfd at `rate_hz` on absolute deadlines (default), or, in
+//!   lockstep, one tick per measured-state message from the actuator.
+//! * Start: from the actuator's measured state (history 1 on State), at rest.
+//! * Motion: the config's program (if any), then run-time [`MotionCommand`]s: Move
+//!   (joint or Cartesian target, soft/cubic/quintic/LSPB), Stop (shortest jerk-limited
+//!   stop), EStop (the same at the e-stop limits, then refuse motion until Reset), Reset.
+//!   Every command is validated field by field; a refused one is counted and never moves
+//!   the arm. A new motion is planned from the current setpoint state (q, q̇, q̈), so the
+//!   stream never jumps. A Move, Stop or EStop abandons the rest of the program.
+//! * Safety: while the actuator reports its safe state, the setpoint follows the
+//!   measured state (flag HOLD_FOR_SAFE_STATE); after the Reset the arm is brought to
+//!   rest from there with a jerk-limited stop. Stale measured state (free-running,
+//!   older than `stale_ms`) triggers the same stop.
+//! * Time: a setpoint's logical time is its tick number × period: one period per
+//!   published setpoint, so a late or skipped tick delays the motion rather than making
+//!   it jump.
+//!
+//! The logic lives in [`PlannerCore`] (no IPC).
+
+pub mod program;
+
+use iceoryx2::prelude::*;
+use microrobot_messages::{
+    CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState, MAX_JOINTS,
+    MotionCommand, ProfileKind, ServiceKind, ServiceRole, ServiceStatus, TargetSpace, monotonic_ns,
+    open_event, open_publish_subscribe, setpoint_flags, state_flags,
+};
+use microrobot_model::ik::{IkOptions, IkTarget};
+use microrobot_model::{ModelData, Robot};
+use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::stats::LatencyHistogram;
+use microrobot_runtime::validate::{SeqTracker, check_fresh, check_state};
+use microrobot_runtime::{BadConfig, PeriodicClock, Shutdown, StatusPort, open_node, waitset};
+use microrobot_trajectory::{
+    Generator, JointState, JointVector, KinematicLimits, MotionRequest, Profile, Sample, Status,
+    Trajectory, stop_trajectory,
+};
+
+use crate::program::ProgramRunner;
+
+/// Why a motion command was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CommandError {
+    #[error("unknown command kind {0}")]
+    UnknownKind(u32),
+    #[error("unknown profile {0}")]
+    UnknownProfile(u32),
+    #[error("unknown target space {0}")]
+    UnknownSpace(u32),
+    #[error("target has {got} joints, the robot has {want}")]
+    WrongDof { got: u32, want: usize },
+    #[error("{field} is not finite")]
+    NonFinite { field: &'static str },
+    #[error("target joint {joint} = {value} is outside [{min}, {max}]")]
+    OutOfLimits {
+        joint: usize,
+        value: f64,
+        min: f64,
+        max: f64,
+    },
+    #[error(
+        "duration_s = {0} is not valid for this profile (> 0 s and <= 3600 s; soft: 0 = time-optimal)"
+    )]
+    BadDuration(f64),
+    #[error("limit_scale = {0} must be in (0, 1] (0: the config's default)")]
+    BadLimitScale(f64),
+    #[error("the command is stale or from the future (stamp {age_ms:.1} ms old)")]
+    Stale { age_ms: f64 },
+    #[error("motion is refused during an e-stop; send reset first")]
+    EStopActive,
+    #[error("motion is refused while the actuator is in its safe state; send reset first")]
+    SafeStateActive,
+    #[error("no inverse-kinematics solution for the Cartesian target (residual {0:.3e} m)")]
+    Unreachable(f64),
+    #[error("the quaternion is not unit length")]
+    BadQuaternion,
+    #[error("cannot plan: {0}")]
+    Plan(String),
+    #[error("the measured state is not known yet")]
+    NotStarted,
+}
+
+/// What the planner is doing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Holding a constant position.
+    Hold,
+    /// Executing a move (program segment or command).
+    Moving,
+    /// Braking for a Stop (or stale state).
+    Stopping,
+    /// Braking for / holding after an e-stop; motion refused until Reset.
+    EStop,
+    /// The actuator is in its safe state: following the measured state.
+    SafeHold,
+}
+
+/// Cumulative counters of the planner.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Counters {
+    pub ticks: u64,
+    pub commands_accepted: u64,
+    pub commands_refused: u64,
+    pub states_refused: u64,
+    pub stale_cycles: u64,
+    pub estops: u64,
+}
+
+/// The planner's logic, independent of IPC and clocks.
+pub struct PlannerCore {
+    robot: Robot,
+    data: ModelData,
+    dof: usize,
+    period_s: f64,
+    lockstep: bool,
+    stale_ns: u64,
+    command_max_age_ns: u64,
+    limits: KinematicLimits,
+    full_limits: KinematicLimits,
+    estop_limits: KinematicLimits,
+    motion: Option<Generator>,
+    current: Sample,
+    mode: Mode,
+    program: Option<ProgramRunner>,
+    program_done: bool,
+    started: bool,
+    tick: u64,
+    state_seq: SeqTracker,
+    last_state: Option<BusState>,
+    /// Counters for the status.
+    pub counters: Counters,
+    /// Last command error, for logging by the caller.
+    pub last_error: Option<CommandError>,
+}
+
+fn scaled(robot: &Robot, scale: f64) -> KinematicLimits {
+    let mut l = KinematicLimits::uniform(1.0, 1.0, 1.0, 0.0, 0.0);
+    for (i, j) in robot.joints().iter().enumerate() {
+        l.velocity[i] = j.limits.velocity * scale;
+        l.acceleration[i] = j.limits.acceleration * scale;
+        l.jerk[i] = j.limits.jerk * scale;
+        l.position_min[i] = j.limits.min;
+        l.position_max[i] = j.limits.max;
+    }
+    l
+}
+
+impl PlannerCore {
+    /// A planner for `robot` with the settings of `cfg` and an optional program.
+    pub fn new(robot: &Robot, cfg: &PipelineConfig, program: Option<ProgramRunner>) -> Self {
+        Self {
+            data: ModelData::new(robot),
+            dof: robot.dof(),
+            robot: robot.clone(),
+            period_s: 1.0 / cfg.rate_hz,
+            lockstep: cfg.lockstep,
+            stale_ns: (cfg.watchdog.stale_ms * 1e6) as u64,
+            command_max_age_ns: (cfg.planner.command_max_age_ms * 1e6) as u64,
+            limits: scaled(robot, cfg.planner.limit_scale),
+            full_limits: scaled(robot, 1.0),
+            estop_limits: scaled(robot, cfg.planner.estop_limit_scale),
+            motion: None,
+            current: Sample::default(),
+            mode: Mode::Hold,
+            program_done: program.is_none(),
+            program,
+            started: false,
+            tick: 0,
+            state_seq: SeqTracker::default(),
+            last_state: None,
+            counters: Counters::default(),
+            last_error: None,
+        }
+    }
+
+    /// Current mode.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Whether the program (if any) has finished or was abandoned, and the arm is at rest.
+    pub fn program_done(&self) -> bool {
+        self.program_done
+    }
+
+    /// Logical time of the last setpoint (s).
+    pub fn motion_time_s(&self) -> f64 {
+        self.tick as f64 * self.period_s
+    }
+
+    /// Whether the first measured state has been seen.
+    pub fn started(&self) -> bool {
+        self.started
+    }
+
+    /// Sequence gaps seen on the state stream.
+    pub fn lost_messages(&self) -> u64 {
+        self.state_seq.lost
+    }
+
+    /// The current setpoint state.
+    pub fn current(&self) -> &Sample {
+        &self.current
+    }
+
+    /// Validates a measured state; the first one sets the start position (at rest).
+    /// Returns whether it was accepted.
+    pub fn accept_state(&mut self, s: &BusState, publisher: u128) -> bool {
+        if check_state(s, self.dof).is_err()
+            || self.state_seq.accept(publisher, s.header.seq).is_err()
+        {
+            self.counters.states_refused += 1;
+            return false;
+        }
+        self.last_state = Some(*s);
+        if !self.started {
+            self.started = true;
+            let mut q = JointVector::zeros();
+            for i in 0..self.dof {
+                q[i] = self.robot.joints()[i].limits.clamp(s.q[i]);
+            }
+            self.current = Sample {
+                q,
+                ..Default::default()
+            };
+            self.start_next_program_segment();
+        }
+        true
+    }
+
+    fn measured_sample(&self) -> Option<Sample> {
+        let s = self.last_state?;
+        let mut out = Sample::default();
+        for i in 0..self.dof {
+            let lim = &self.robot.joints()[i].limits;
+            out.q[i] = lim.clamp(s.q[i]);
+            out.qd[i] = s.qd[i].clamp(-lim.velocity, lim.velocity);
+        }
+        Some(out)
+    }
+
+    fn start_next_program_segment(&mut self) {
+        let Some(p) = self.program.as_mut() else {
+            return;
+        };
+        match p.next_segment(self.dof, &self.current.state(), &self.limits) {
+            Some(Ok(t)) => {
+                self.motion = Some(Generator::new(t));
+                self.mode = Mode::Moving;
+            }
+            Some(Err(e)) => {
+                tracing::error!(
+                    "planner: program segment cannot be planned, program abandoned: {e}"
+                );
+                self.program = None;
+            }
+            None => {
+                self.program = None;
+            }
+        }
+    }
+
+    fn abandon_program(&mut self) {
+        if self.program.take().is_some() {
+            tracing::warn!("planner: program abandoned by a run-time command");
+        }
+    }
+
+    fn brake(&mut self, estop: bool) -> Result<(), CommandError> {
+        let lim = if estop {
+            self.estop_limits
+        } else {
+            self.full_limits
+        };
+        let t = stop_trajectory(self.dof, &self.current.state(), &lim)
+            .map_err(|e| CommandError::Plan(e.to_string()))?;
+        self.motion = Some(Generator::new(t));
+        self.mode = if estop { Mode::EStop } else { Mode::Stopping };
+        Ok(())
+    }
+
+    /// Validates and executes a motion command received at `now_ns`.
+    pub fn on_command(&mut self, c: &MotionCommand, now_ns: u64) -> Result<(), CommandError> {
+        let r = self.command(c, now_ns);
+        match &r {
+            Ok(()) => self.counters.commands_accepted += 1,
+            Err(e) => {
+                self.counters.commands_refused += 1;
+                self.last_error = Some(e.clone());
+            }
+        }
+        r
+    }
+
+    fn command(&mut self, c: &MotionCommand, now_ns: u64) -> Result<(), CommandError> {
+        let kind = CommandKind::from_wire(c.kind).ok_or(CommandError::UnknownKind(c.kind))?;
+        if c.stamp_ns != 0
+            && (c.stamp_ns > now_ns.saturating_add(1_000_000_000)
+                || now_ns.saturating_sub(c.stamp_ns) > self.command_max_age_ns)
+        {
+            return Err(CommandError::Stale {
+                age_ms: (now_ns as f64 - c.stamp_ns as f64) / 1e6,
+            });
+        }
+        if !self.started {
+            return Err(CommandError::NotStarted);
+        }
+        match kind {
+            CommandKind::Reset => {
+                match self.mode {
+                    Mode::EStop => {
+                        self.motion = None;
+                        self.mode = Mode::Hold;
+                        self.current.qd = JointVector::zeros();
+                        self.current.qdd = JointVector::zeros();
+                        self.current.jerk = JointVector::zeros();
+                    }
+                    Mode::SafeHold => {
+                        // Bring the followed measured state to rest, jerk-limited.
+                        self.brake(false)?;
+                    }
+                    _ => {}
+                }
+                Ok(())
+            }
+            CommandKind::EStop => {
+                self.counters.estops += 1;
+                self.abandon_program();
+                if self.mode == Mode::SafeHold {
+                    // The actuator already holds; stay with it, but remember the e-stop.
+                    return Ok(());
+                }
+                self.brake(true)
+            }
+            CommandKind::Stop => {
+                self.check_motion_allowed()?;
+                self.abandon_program();
+                self.brake(false)
+            }
+            CommandKind::Move => {
+                self.check_motion_allowed()?;
+                let t = self.plan_move(c)?;
+                self.abandon_program();
+                self.motion = Some(Generator::new(t));
+                self.mode = Mode::Moving;
+                self.program_done = false;
+                Ok(())
+            }
+        }
+    }
+
+    fn check_motion_allowed(&self) -> Result<(), CommandError> {
+        match self.mode {
+            Mode::EStop => Err(CommandError::EStopActive),
+            Mode::SafeHold => Err(CommandError::SafeStateActive),
+            _ => Ok(()),
+        }
+    }
+
+    fn plan_move(&mut self, c: &MotionCommand) -> Result<Trajectory, CommandError> {
+        let profile_kind =
+            ProfileKind::from_wire(c.profile).ok_or(CommandError::UnknownProfile(c.profile))?;
+        let space = TargetSpace::from_wire(c.space).ok_or(CommandError::UnknownSpace(c.space))?;
+        if !c.duration_s.is_finite() {
+            return Err(CommandError::NonFinite {
+                field: "duration_s",
+            });
+        }
+        if !c.limit_scale.is_finite() {
+            return Err(CommandError::NonFinite {
+                field: "limit_scale",
+            });
+        }
+        if !(0.0..=1.0).contains(&c.limit_scale) {
+            return Err(CommandError::BadLimitScale(c.limit_scale));
+        }
+        let d = c.duration_s;
+        let fixed = profile_kind != ProfileKind::Soft;
+        if d < 0.0 || d > 3600.0 || (fixed && d <= 0.0) {
+            return Err(CommandError::BadDuration(d));
+        }
+        let mut target = JointVector::zeros();
+        match space {
+            TargetSpace::Joint => {
+                if c.dof as usize != self.dof {
+                    return Err(CommandError::WrongDof {
+                        got: c.dof,
+                        want: self.dof,
+                    });
+                }
+                for i in 0..self.dof {
+                    let v = c.target[i];
+                    if !v.is_finite() {
+                        return Err(CommandError::NonFinite { field: "target" });
+                    }
+                    let l = &self.robot.joints()[i].limits;
+                    if !l.contains(v) {
+                        return Err(CommandError::OutOfLimits {
+                            joint: i,
+                            value: v,
+                            min: l.min,
+                            max: l.max,
+                        });
+                    }
+                    target[i] = v;
+                }
+            }
+            TargetSpace::Cartesian => {
+                let t = &c.target;
+                if !t[..7].iter().all(|v| v.is_finite()) {
+                    return Err(CommandError::NonFinite { field: "target" });
+                }
+                let qn = (t[3] * t[3] + t[4] * t[4] + t[5] * t[5] + t[6] * t[6]).sqrt();
+                if (qn - 1.0).abs() > 1e-3 {
+                    return Err(CommandError::BadQuaternion);
+                }
+                let rot = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    t[3], t[4], t[5], t[6],
+                ));
+                let iso = nalgebra::Isometry3::from_parts(
+                    nalgebra::Translation3::new(t[0], t[1], t[2]),
+                    rot,
+                );
+                let sol = microrobot_model::ik::solve(
+                    &self.robot,
+                    &mut self.data,
+                    &IkTarget::Pose(iso),
+                    &self.current.q,
+                    &IkOptions {
+                        position_tolerance_m: 1e-7,
+                        orientation_tolerance_rad: 1e-6,
+                        ..IkOptions::default()
+                    },
+                )
+                .map_err(|e| CommandError::Plan(e.to_string()))?;
+                if !sol.converged || sol.position_error_m > 1e-5 || sol.orientation_error_rad > 1e-4
+                {
+                    return Err(CommandError::Unreachable(sol.position_error_m));
+                }
+                target = sol.q;
+            }
+        }
+        let mut limits = if c.limit_scale == 0.0 {
+            self.limits
+        } else {
+            scaled(&self.robot, c.limit_scale)
+        };
+        limits.position_min = self.full_limits.position_min;
+        limits.position_max = self.full_limits.position_max;
+        let profile = match profile_kind {
+            ProfileKind::Soft => Profile::Soft {
+                min_duration: (d > 0.0).then_some(d),
+            },
+            ProfileKind::Cubic => Profile::Cubic { duration: d },
+            ProfileKind::Quintic => Profile::Quintic { duration: d },
+            ProfileKind::Lspb => Profile::Lspb {
+                duration: d,
+                cruise_velocity: None,
+            },
+        };
+        let req = MotionRequest {
+            dof: self.dof,
+            start: self.current.state(),
+            target: JointState::at_rest(target),
+            profile,
+            limits,
+        };
+        let t = Trajectory::plan(&req).map_err(|e| CommandError::Plan(e.to_string()))?;
+        // Fixed-duration profiles are not planned within the limits: refuse the ones
+        // that would exceed the robot's own limits.
+        t.check_limits(&self.full_limits, profile_kind == ProfileKind::Quintic)
+            .map_err(|e| CommandError::Plan(e.to_string()))?;
+        Ok(t)
+    }
+
+    /// Checks the measured state at `now_ns` (free-running): the actuator's safe state
+    /// makes the setpoint follow the measured state; a stale state starts a stop.
+    pub fn check_state(&mut self, now_ns: u64) {
+        let Some(s) = self.last_state else {
+            return;
+        };
+        if s.flags & state_flags::SAFE_STATE != 0 || s.lifecycle == LifecycleState::Fault as u32 {
+            if self.mode != Mode::SafeHold {
+                tracing::warn!(
+                    "planner: the actuator reports its safe state; following the measured state"
+                );
+                self.abandon_program();
+                self.motion = None;
+                self.mode = Mode::SafeHold;
+            }
+            return;
+        }
+        if !self.lockstep
+            && check_fresh(s.header.stamp_ns, now_ns, self.stale_ns).is_err()
+            && matches!(self.mode, Mode::Moving)
+        {
+            self.counters.stale_cycles += 1;
+            tracing::warn!("planner: measured state is stale; stopping");
+            self.abandon_program();
+            let _ = self.brake(false);
+        } else if !self.lockstep && check_fresh(s.header.stamp_ns, now_ns, self.stale_ns).is_err() {
+            self.counters.stale_cycles += 1;
+        }
+    }
+
+    /// One tick: advances the motion by one period and returns the setpoint (stamped
+    /// `now_ns`).
+    pub fn tick(&mut self, now_ns: u64) -> JointSetpoint {
+        self.tick += 1;
+        self.counters.ticks += 1;
+        let mut flags = 0;
+        if self.mode == Mode::SafeHold {
+            if let Some(m) = self.measured_sample() {
+                self.current = m;
+            }
+            flags |= setpoint_flags::HOLD_FOR_SAFE_STATE;
+        } else if let Some(g) = self.motion.as_mut() {
+            let (status, sample) = g.update(self.period_s);
+            self.current = sample;
+            flags |= setpoint_flags::MOVING;
+            if status == Status::Finished {
+                self.motion = None;
+                // Hold exactly at rest.
+                self.current.qd = JointVector::zeros();
+                self.current.qdd = JointVector::zeros();
+                self.current.jerk = JointVector::zeros();
+                match self.mode {
+                    Mode::Moving | Mode::Stopping => {
+                        self.mode = Mode::Hold;
+                        self.start_next_program_segment();
+                    }
+                    _ => {}
+                }
+            }
+        }
+        match self.mode {
+            Mode::Stopping => flags |= setpoint_flags::STOPPING,
+            Mode::EStop => {
+                flags |= setpoint_flags::ESTOP;
+                if self.motion.is_some() {
+                    flags |= setpoint_flags::STOPPING;
+                }
+            }
+            _ => {}
+        }
+        if self.program.is_none() && self.motion.is_none() && self.mode != Mode::SafeHold {
+            self.program_done = true;
+        }
+        if self.program_done {
+            flags |= setpoint_flags::PROGRAM_DONE;
+        }
+        let mut sp = JointSetpoint {
+            header: Header {
+                seq: self.tick,
+                tick: self.tick,
+                stamp_ns: now_ns,
+                source_stamp_ns: now_ns,
+            },
+            dof: self.dof as u32,
+            flags,
+            ..Default::default()
+        };
+        for i in 0..self.dof.min(MAX_JOINTS) {
+            sp.q[i] = self.current.q[i];
+            sp.qd[i] = self.current.qd[i];
+            sp.qdd[i] = self.current.qdd[i];
+            sp.jerk[i] = self.current.jerk[i];
+        }
+        sp
+    }
+}
+
+/// Loads the robot file named by the config (a bad file is a config error).
+pub fn load_robot(cfg: &PipelineConfig) -> anyhow::Result<Robot> {
+    Robot::from_file(&cfg.robot).map_err(|e| BadConfig(format!("robot file: {e}")).into())
+}
+
+/// The planner service (`microrobot service planner`).
+pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let robot = load_robot(cfg)?;
+    let program = match &cfg.program {
+        Some(p) => Some(
+            ProgramRunner::from_file(p, &robot).map_err(|e| BadConfig(format!("program: {e}")))?,
+        ),
+        None => None,
+    };
+    let inst = cfg.instance.as_str();
+    let node = open_node(inst, ServiceRole::Planner)?;
+    let err = |what: &'static str| move |e: &dyn std::fmt::Debug| anyhow::anyhow!("{what}: {e:?}");
+
+    let sp_pub = open_publish_subscribe::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| err("setpoint publisher")(&e))?;
+    let sp_notifier = open_event(&node, inst, ServiceKind::Setpoint)?
+        .notifier_builder()
+        .create()
+        .map_err(|e| err("setpoint notifier")(&e))?;
+    let st_sub = open_publish_subscribe::<BusState>(&node, inst, ServiceKind::State)?
+        .subscriber_builder()
+        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
+        .history_request(1)
+        .create()
+        .map_err(|e| err("state subscriber")(&e))?;
+    let st_listener = open_event(&node, inst, ServiceKind::State)?
+        .listener_builder()
+        .create()
+        .map_err(|e| err("state listener")(&e))?;
+    let cmd_sub = open_publish_subscribe::<MotionCommand>(&node, inst, ServiceKind::Command)?
+        .subscriber_builder()
+        .history_request(0)
+        .create()
+        .map_err(|e| err("command subscriber")(&e))?;
+    let cmd_listener = open_event(&node, inst, ServiceKind::Command)?
+        .listener_builder()
+        .create()
+        .map_err(|e| err("command listener")(&e))?;
+    let mut status = StatusPort::open(&node, inst, ServiceRole::Planner, cfg.status_period_ms)?;
+
+    let mut core = PlannerCore::new(&robot, cfg, program);
+    let mut st = ServiceStatus {
+        lifecycle: LifecycleState::Inactive as u32,
+        ..Default::default()
+    };
+    status.publish(monotonic_ns(), &mut st);
+
+    // Wait for the actuator's measured state (history 1).
+    let deadline = monotonic_ns() + (cfg.planner.state_timeout_ms * 1e6) as u64;
+    while !core.started() {
+        if shutdown.is_requested() {
+            status.publish_final(&mut st);
+            return Ok(());
+        }
+        let _ = st_listener.try_wait(|_| {});
+        while let Ok(Some(s)) = st_sub.receive() {
+            let msg = *s;
+            let publisher = s.header().publisher_id().value();
+            drop(s);
+            core.accept_state(&msg, publisher);
+        }
+        if core.started() {
+            break;
+        }
+        if monotonic_ns() > deadline {
+            anyhow::bail!(
+                "no measured state from the actuator within {} ms (is the actuator of instance `{inst}` running?)",
+                cfg.planner.state_timeout_ms
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    tracing::info!("planner: starting from the measured state");
+
+    let mut lateness = LatencyHistogram::new();
+    let PeriodicClock { timer, mut ticker } =
+        PeriodicClock::start(cfg.period_ns(), cfg.realtime.overrun)?;
+    if cfg.lockstep {
+        // Lockstep ticks on states; the timer only paces status and watchdog checks.
+        let p = status.period_ns();
+        timer.arm_absolute(monotonic_ns() + p, p)?;
+    }
+    let ws = waitset()?;
+    let g_state = ws
+        .attach_notification(&st_listener)
+        .map_err(|e| err("waitset")(&e))?;
+    let g_cmd = ws
+        .attach_notification(&cmd_listener)
+        .map_err(|e| err("waitset")(&e))?;
+    let g_timer = ws
+        .attach_notification(&timer)
+        .map_err(|e| err("waitset")(&e))?;
+    let g_stop = ws
+        .attach_notification(shutdown)
+        .map_err(|e| err("waitset")(&e))?;
+
+    let publish = |sp: JointSetpoint| {
+        if sp_pub.send_copy(sp).is_ok() {
+            let _ = sp_notifier.notify();
+        }
+    };
+    let fill = |st: &mut ServiceStatus,
+                core: &PlannerCore,
+                lat: &LatencyHistogram,
+                ticker: &microrobot_runtime::Ticker| {
+        st.ready = 1;
+        st.lifecycle = if core.mode() == Mode::EStop || core.mode() == Mode::SafeHold {
+            LifecycleState::Fault as u32
+        } else {
+            LifecycleState::Active as u32
+        };
+        st.cycles = core.counters.ticks;
+        st.deadline_misses = if cfg.lockstep {
+            0
+        } else {
+            ticker.deadline_misses
+        };
+        st.skipped_ticks = if cfg.lockstep {
+            0
+        } else {
+            ticker.skipped_ticks
+        };
+        st.lost_messages = core.lost_messages();
+        st.refused_messages = core.counters.states_refused + core.counters.commands_refused;
+        st.stale_cycles = core.counters.stale_cycles;
+        st.faults = core.counters.estops;
+        st.commands_accepted = core.counters.commands_accepted;
+        st.commands_refused = core.counters.commands_refused;
+        st.motion_time_s = core.motion_time_s();
+        st.program_done = core.program_done() as u32;
+        st.latency = lat.summary();
+    };
+
+    if cfg.lockstep {
+        // The first setpoint answers the initial state.
+        publish(core.tick(monotonic_ns()));
+    }
+    fill(&mut st, &core, &lateness, &ticker);
+    status.publish(monotonic_ns(), &mut st);
+
+    while !shutdown.is_requested() {
+        let mut fired = [false; 4];
+        ws.wait_and_process_once(|id| {
+            fired[0] |= id.has_event_from(&g_state);
+            fired[1] |= id.has_event_from(&g_cmd);
+            fired[2] |= id.has_event_from(&g_timer);
+            fired[3] |= id.has_event_from(&g_stop);
+            CallbackProgression::Continue
+        })
+        .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
+        if fired[3] || shutdown.is_requested() {
+            break;
+        }
+        if fired[1] {
+            let _ = cmd_listener.try_wait(|_| {});
+            while let Ok(Some(s)) = cmd_sub.receive() {
+                let c = *s;
+                drop(s);
+                match core.on_command(&c, monotonic_ns()) {
+                    Ok(()) => {
+                        tracing::info!("planner: command {} (seq {}) accepted", c.kind, c.seq)
+                    }
+                    Err(e) => {
+                        tracing::warn!("planner: command {} (seq {}) refused: {e}", c.kind, c.seq)
+                    }
+                }
+            }
+        }
+        // States: in lockstep each one is a tick; otherwise keep the newest.
+        if fired[0] || !cfg.lockstep {
+            let _ = st_listener.try_wait(|_| {});
+            while let Ok(Some(s)) = st_sub.receive() {
+                let msg = *s;
+                let publisher = s.header().publisher_id().value();
+                drop(s);
+                if core.accept_state(&msg, publisher) && cfg.lockstep {
+                    let now = monotonic_ns();
+                    core.check_state(now);
+                    publish(core.tick(now));
+                }
+            }
+        }
+        if fired[2] {
+            ticker.on_expirations(timer.read_expirations());
+            if cfg.lockstep {
+                while ticker.next_tick().is_some() {}
+            } else {
+                while let Some(t) = ticker.next_tick() {
+                    let now = monotonic_ns();
+                    lateness.record(now.saturating_sub(t.ideal_ns));
+                    core.check_state(now);
+                    publish(core.tick(monotonic_ns()));
+                }
+            }
+        }
+        let now = monotonic_ns();
+        if status.due(now) {
+            fill(&mut st, &core, &lateness, &ticker);
+            status.publish(now, &mut st);
+        }
+    }
+    fill(&mut st, &core, &lateness, &ticker);
+    status.publish_final(&mut st);
+    Ok(())
+}

@@ -1,1 +1,125 @@
-//! placeholder
+//! The shared service runtime of the microrobot pipeline: config loading, tracing, one
+//! owner of SIGINT/SIGTERM, absolute monotonic deadlines from a timerfd, overrun
+//! policy, millisecond watchdogs, bus-payload validation, real-time settings, latency
+//! histograms and the ~10 Hz status message. The planner, dynamics and actuator
+//! services are `fn(&PipelineConfig, &Shutdown) -> anyhow::Result<()>` run by
+//! [`service_main`].
+
+pub mod config;
+pub mod node;
+pub mod rt;
+pub mod shutdown;
+pub mod stats;
+pub mod status;
+pub mod timer;
+pub mod validate;
+pub mod watchdog;
+
+use std::path::Path;
+use std::process::ExitCode;
+
+pub use config::{ConfigError, PipelineConfig};
+pub use microrobot_messages::ServiceRole;
+pub use node::{InstanceInUse, open_node, waitset};
+pub use shutdown::Shutdown;
+pub use status::StatusPort;
+pub use timer::{PeriodicClock, Ticker, TimerFd};
+pub use watchdog::{Freshness, Watchdog};
+
+/// Process exit codes shared by the services and the supervisor.
+pub mod exit_code {
+    /// Clean exit (also after SIGINT/SIGTERM).
+    pub const OK: u8 = 0;
+    /// Any other failure.
+    pub const FAILURE: u8 = 1;
+    /// The config file (or a file it names) was refused.
+    pub const BAD_CONFIG: u8 = 2;
+    /// Supervisor: a service failed and was not restarted.
+    pub const SERVICE_FAILED: u8 = 3;
+    /// Supervisor: a service did not become ready, or the run did not finish, in time.
+    pub const TIMEOUT: u8 = 4;
+    /// A live process already runs this instance (same instance name).
+    pub const INSTANCE_IN_USE: u8 = 5;
+}
+
+/// A service's main loop: runs until the program is done or `shutdown` is requested.
+pub type ServiceFn = fn(&PipelineConfig, &Shutdown) -> anyhow::Result<()>;
+
+/// A config (or robot/program file) error, so [`service_main`] exits with BAD_CONFIG.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct BadConfig(pub String);
+
+/// Installs tracing (`RUST_LOG`, default `info`, to stderr), makes `ctrlc` the one owner
+/// of SIGINT/SIGTERM, asks for SIGTERM if the parent (the supervisor) dies, loads the
+/// config, applies its real-time settings (each falling back with one warning) and runs
+/// `service`. Returns the process exit code ([`exit_code`]).
+pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -> ExitCode {
+    init_tracing();
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+    let shutdown = match Shutdown::new() {
+        Ok(s) => s,
+        Err(e) => {
+            tracing::error!("{}: cannot create shutdown eventfd: {e}", role.name());
+            return ExitCode::from(exit_code::FAILURE);
+        }
+    };
+    if let Err(e) = shutdown.install_signal_handler() {
+        tracing::error!(
+            "{}: cannot install SIGINT/SIGTERM handler: {e}",
+            role.name()
+        );
+        return ExitCode::from(exit_code::FAILURE);
+    }
+    // If the supervisor dies, we get SIGTERM and stop cleanly (the actuator goes safe
+    // on its own watchdog either way).
+    // SAFETY: plain prctl.
+    unsafe { libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM, 0, 0, 0) };
+
+    let cfg = match PipelineConfig::load(config_path) {
+        Ok(c) => c,
+        Err(e) => {
+            tracing::error!("{}: bad config: {e}", role.name());
+            return ExitCode::from(exit_code::BAD_CONFIG);
+        }
+    };
+    let rt = rt::apply(&cfg.realtime);
+    tracing::info!(
+        "{} starting: instance `{}`, {} Hz{}, real-time settings applied: {:?}",
+        role.name(),
+        cfg.instance,
+        cfg.rate_hz,
+        if cfg.lockstep { ", lockstep" } else { "" },
+        rt.applied
+    );
+    let result = service(&cfg, &shutdown);
+    drop(rt);
+    match result {
+        Ok(()) => {
+            tracing::info!("{} stopped cleanly", role.name());
+            ExitCode::from(exit_code::OK)
+        }
+        Err(e) => {
+            if let Some(e) = e.downcast_ref::<InstanceInUse>() {
+                tracing::error!("{}: {e}", role.name());
+                ExitCode::from(exit_code::INSTANCE_IN_USE)
+            } else if e.downcast_ref::<BadConfig>().is_some() {
+                tracing::error!("{}: bad config: {e:#}", role.name());
+                ExitCode::from(exit_code::BAD_CONFIG)
+            } else {
+                tracing::error!("{} failed: {e:#}", role.name());
+                ExitCode::from(exit_code::FAILURE)
+            }
+        }
+    }
+}
+
+/// Installs the tracing subscriber once (env filter from `RUST_LOG`, default `info`, stderr).
+pub fn init_tracing() {
+    use tracing_subscriber::EnvFilter;
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}

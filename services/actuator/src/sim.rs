@@ -1,0 +1,443 @@
+//! The simulated arm: an [`ActuatorBackend`] that integrates the forward dynamics of
+//! the robot model, `qdd = M(q)⁻¹ (τ_sat − h(q, qd) − τ_f,extra(qd))`.
+//!
+//! * Integrator: classic RK4 (default) or semi-implicit Euler, with `substeps` equal
+//!   steps of `period / substeps` per `write()`; the torque is held constant over the
+//!   period (zero-order hold, like a drive's cyclic target torque).
+//! * Torque saturation at each joint's effort limit (flagged in [`Measured::saturated`]).
+//! * A deliberately wrong plant: `mass_scale` multiplies every link mass and inertia
+//!   (1.1 = links 10 % heavier than the model the dynamics service uses), plus extra
+//!   viscous and Coulomb friction the dynamics does not know.
+//! * Hard stops at the position limits (the joint stops there, velocity into the stop zeroed).
+//! * Gaussian sensor noise on q and qd from a seeded generator (same seed, same noise).
+//! * Brakes: while Inactive the arm does not move.
+//!
+//! Allocation-free after construction.
+
+use microrobot_messages::LifecycleState;
+use microrobot_model::{JointVector, ModelData, Robot, forward_dynamics};
+use microrobot_runtime::config::{Integrator, SimConfig};
+
+use crate::backend::{ActuatorBackend, BackendError, Measured};
+
+/// SplitMix64 + Box-Muller: a tiny deterministic Gaussian source.
+#[derive(Debug, Clone)]
+pub struct Gaussian {
+    state: u64,
+    spare: Option<f64>,
+}
+
+impl Gaussian {
+    /// A generator seeded with `seed`.
+    pub fn new(seed: u64) -> Self {
+        Self {
+            state: seed ^ 0x9E37_79B9_7F4A_7C15,
+            spare: None,
+        }
+    }
+
+    fn next_u64(&mut self) -> u64 {
+        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in (0, 1].
+    fn uniform(&mut self) -> f64 {
+        ((self.next_u64() >> 11) as f64 + 1.0) / (1u64 << 53) as f64
+    }
+
+    /// A standard normal sample.
+    pub fn sample(&mut self) -> f64 {
+        if let Some(s) = self.spare.take() {
+            return s;
+        }
+        let u1 = self.uniform();
+        let u2 = self.uniform();
+        let r = (-2.0 * u1.ln()).sqrt();
+        let th = 2.0 * std::f64::consts::PI * u2;
+        self.spare = Some(r * th.sin());
+        r * th.cos()
+    }
+}
+
+/// The simulated arm.
+#[derive(Debug, Clone)]
+pub struct SimArm {
+    plant: Robot,
+    data: ModelData,
+    dof: usize,
+    q: JointVector,
+    qd: JointVector,
+    tau_applied: JointVector,
+    saturated: bool,
+    effort: JointVector,
+    q_min: JointVector,
+    q_max: JointVector,
+    viscous: f64,
+    coulomb: f64,
+    noise_q: f64,
+    noise_qd: f64,
+    rng: Gaussian,
+    integrator: Integrator,
+    substeps: u32,
+    lifecycle: LifecycleState,
+    fault: &'static str,
+}
+
+impl SimArm {
+    /// A simulated copy of `model` (masses scaled by `cfg.mass_scale`) at rest at `q0`
+    /// (clamped into the joint limits).
+    pub fn new(model: &Robot, cfg: &SimConfig, q0: &JointVector) -> Self {
+        let plant = if cfg.mass_scale == 1.0 {
+            model.clone()
+        } else {
+            model.with_scaled_link_masses(cfg.mass_scale)
+        };
+        let dof = plant.dof();
+        let mut effort = JointVector::zeros();
+        let mut q = JointVector::zeros();
+        let (q_min, q_max) = plant.position_limits();
+        for (i, j) in plant.joints().iter().enumerate() {
+            effort[i] = j.limits.effort;
+            q[i] = j.limits.clamp(q0[i]);
+        }
+        let data = ModelData::new(&plant);
+        Self {
+            plant,
+            data,
+            dof,
+            q,
+            qd: JointVector::zeros(),
+            tau_applied: JointVector::zeros(),
+            saturated: false,
+            effort,
+            q_min,
+            q_max,
+            viscous: cfg.viscous_friction_nms,
+            coulomb: cfg.coulomb_friction_nm,
+            noise_q: cfg.sensor_noise_rad,
+            noise_qd: cfg.sensor_noise_rad_s,
+            rng: Gaussian::new(cfg.seed),
+            integrator: cfg.integrator,
+            substeps: cfg.substeps.max(1),
+            lifecycle: LifecycleState::Unconfigured,
+            fault: "",
+        }
+    }
+
+    /// The true (noise-free) state.
+    pub fn true_state(&self) -> (JointVector, JointVector) {
+        (self.q, self.qd)
+    }
+
+    /// Sets the true state (tests, restarts).
+    pub fn set_state(&mut self, q: &JointVector, qd: &JointVector) {
+        self.q = *q;
+        self.qd = *qd;
+    }
+
+    /// Why the simulation faulted (empty when it did not).
+    pub fn fault_reason(&self) -> &'static str {
+        self.fault
+    }
+
+    #[inline]
+    fn accel(&mut self, q: &JointVector, qd: &JointVector, tau: &JointVector) -> JointVector {
+        let mut t = *tau;
+        if self.viscous != 0.0 || self.coulomb != 0.0 {
+            for i in 0..self.dof {
+                let s = if qd[i] > 0.0 {
+                    1.0
+                } else if qd[i] < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                };
+                t[i] -= self.viscous * qd[i] + self.coulomb * s;
+            }
+        }
+        forward_dynamics(&self.plant, &mut self.data, q, qd, &t)
+    }
+
+    /// Integrates the plant over `dt` under the constant torque `tau` (already saturated).
+    fn integrate(&mut self, tau: &JointVector, dt: f64) {
+        let h = dt / self.substeps as f64;
+        for _ in 0..self.substeps {
+            let (q, qd) = (self.q, self.qd);
+            match self.integrator {
+                Integrator::SemiImplicitEuler => {
+                    let a = self.accel(&q, &qd, tau);
+                    self.qd = qd + a * h;
+                    self.q = q + self.qd * h;
+                }
+                Integrator::Rk4 => {
+                    let k1v = qd;
+                    let k1a = self.accel(&q, &qd, tau);
+                    let q2 = q + k1v * (h / 2.0);
+                    let v2 = qd + k1a * (h / 2.0);
+                    let k2a = self.accel(&q2, &v2, tau);
+                    let q3 = q + v2 * (h / 2.0);
+                    let v3 = qd + k2a * (h / 2.0);
+                    let k3a = self.accel(&q3, &v3, tau);
+                    let q4 = q + v3 * h;
+                    let v4 = qd + k3a * h;
+                    let k4a = self.accel(&q4, &v4, tau);
+                    self.q = q + (k1v + v2 * 2.0 + v3 * 2.0 + v4) * (h / 6.0);
+                    self.qd = qd + (k1a + k2a * 2.0 + k3a * 2.0 + k4a) * (h / 6.0);
+                }
+            }
+            // Hard stops.
+            for i in 0..self.dof {
+                if self.q[i] < self.q_min[i] {
+                    self.q[i] = self.q_min[i];
+                    self.qd[i] = self.qd[i].max(0.0);
+                } else if self.q[i] > self.q_max[i] {
+                    self.q[i] = self.q_max[i];
+                    self.qd[i] = self.qd[i].min(0.0);
+                }
+            }
+        }
+    }
+
+    fn wrong(&self, call: &'static str) -> BackendError {
+        BackendError::WrongState {
+            call,
+            state: self.lifecycle,
+        }
+    }
+}
+
+impl ActuatorBackend for SimArm {
+    fn dof(&self) -> usize {
+        self.dof
+    }
+
+    fn lifecycle(&self) -> LifecycleState {
+        self.lifecycle
+    }
+
+    fn configure(&mut self) -> Result<(), BackendError> {
+        if self.lifecycle != LifecycleState::Unconfigured {
+            return Err(self.wrong("configure"));
+        }
+        self.lifecycle = LifecycleState::Inactive;
+        Ok(())
+    }
+
+    fn activate(&mut self) -> Result<(), BackendError> {
+        if self.lifecycle != LifecycleState::Inactive {
+            return Err(self.wrong("activate"));
+        }
+        self.lifecycle = LifecycleState::Active;
+        Ok(())
+    }
+
+    fn deactivate(&mut self) -> Result<(), BackendError> {
+        if self.lifecycle != LifecycleState::Active {
+            return Err(self.wrong("deactivate"));
+        }
+        self.qd = JointVector::zeros();
+        self.lifecycle = LifecycleState::Inactive;
+        Ok(())
+    }
+
+    fn reset_fault(&mut self) -> Result<(), BackendError> {
+        if self.lifecycle != LifecycleState::Fault {
+            return Err(self.wrong("reset_fault"));
+        }
+        self.qd = JointVector::zeros();
+        self.fault = "";
+        self.lifecycle = LifecycleState::Inactive;
+        Ok(())
+    }
+
+    fn write(&mut self, tau: &JointVector, period_s: f64) -> Result<(), BackendError> {
+        match self.lifecycle {
+            LifecycleState::Active => {}
+            LifecycleState::Fault => return Err(BackendError::Fault(self.fault)),
+            _ => return Err(self.wrong("write")),
+        }
+        let mut t = JointVector::zeros();
+        self.saturated = false;
+        for i in 0..self.dof {
+            let lim = self.effort[i];
+            let v = tau[i];
+            t[i] = if v > lim {
+                self.saturated = true;
+                lim
+            } else if v < -lim {
+                self.saturated = true;
+                -lim
+            } else {
+                v
+            };
+        }
+        let (q0, qd0) = (self.q, self.qd);
+        self.integrate(&t, period_s);
+        let ok = (0..self.dof).all(|i| self.q[i].is_finite() && self.qd[i].is_finite());
+        if !ok {
+            // Keep the last good state; the arm is "stuck" until a fault reset.
+            self.q = q0;
+            self.qd = qd0;
+            self.fault = "forward dynamics diverged (singular mass matrix or non-finite state)";
+            self.lifecycle = LifecycleState::Fault;
+            return Err(BackendError::Fault(self.fault));
+        }
+        self.tau_applied = t;
+        Ok(())
+    }
+
+    fn read(&mut self) -> Result<Measured, BackendError> {
+        if self.lifecycle == LifecycleState::Unconfigured {
+            return Err(self.wrong("read"));
+        }
+        let mut m = Measured {
+            q: self.q,
+            qd: self.qd,
+            tau_applied: if self.lifecycle == LifecycleState::Active {
+                self.tau_applied
+            } else {
+                JointVector::zeros()
+            },
+            saturated: self.saturated,
+        };
+        if self.noise_q > 0.0 || self.noise_qd > 0.0 {
+            for i in 0..self.dof {
+                m.q[i] += self.noise_q * self.rng.sample();
+                m.qd[i] += self.noise_qd * self.rng.sample();
+            }
+        }
+        Ok(m)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use microrobot_runtime::config::PipelineConfig;
+
+    /// A pendulum: point mass 1 kg at 0.5 m, no gravity along the swing plane when
+    /// gravity is zero; here gravity along −y with the arm along x.
+    fn pendulum(gravity: f64) -> Robot {
+        let text = format!(
+            r#"
+[robot]
+name = "pendulum"
+gravity_mps2 = [0.0, {gravity}, 0.0]
+[[joints]]
+name = "j1"
+kind = "revolute"
+dh = {{ theta_deg = 0.0, d_mm = 0.0, a_mm = 500.0, alpha_deg = 0.0 }}
+limits = {{ min_deg = -720.0, max_deg = 720.0, vel_deg_s = 900.0, acc_deg_s2 = 900.0, jerk_deg_s3 = 9000.0, torque_nm = 20.0 }}
+link = {{ mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]] }}
+"#
+        );
+        Robot::from_toml_str(&text, "pendulum.toml").unwrap()
+    }
+
+    fn sim_cfg(integrator: Integrator, substeps: u32) -> SimConfig {
+        let mut c = PipelineConfig::default().actuator.sim;
+        c.integrator = integrator;
+        c.substeps = substeps;
+        c
+    }
+
+    fn active(robot: &Robot, cfg: &SimConfig) -> SimArm {
+        let mut s = SimArm::new(robot, cfg, &JointVector::zeros());
+        s.configure().unwrap();
+        s.activate().unwrap();
+        s
+    }
+
+    #[test]
+    fn constant_torque_without_gravity_matches_the_closed_form() {
+        // I = m l² = 0.25 kg·m²; τ = 1 N·m → qdd = 4 rad/s², q(t) = 2 t².
+        let robot = pendulum(0.0);
+        for (integ, tol) in [
+            (Integrator::Rk4, 1e-12),
+            (Integrator::SemiImplicitEuler, 5e-3),
+        ] {
+            let mut s = active(&robot, &sim_cfg(integ, 2));
+            let mut tau = JointVector::zeros();
+            tau[0] = 1.0;
+            for _ in 0..1000 {
+                s.write(&tau, 1e-3).unwrap();
+            }
+            let (q, qd) = s.true_state();
+            assert!((q[0] - 2.0).abs() < tol, "{integ:?}: q = {}", q[0]);
+            assert!((qd[0] - 4.0).abs() < 1e-9, "{integ:?}: qd = {}", qd[0]);
+        }
+    }
+
+    #[test]
+    fn rk4_small_oscillation_matches_the_pendulum_period() {
+        // Gravity along −y, arm along +x at q = 0: hanging position is q = −π/2.
+        // Small oscillation about it: θ'' = −(g/l) θ, ω = sqrt(9.81/0.5).
+        let robot = pendulum(-9.81);
+        let mut s = active(&robot, &sim_cfg(Integrator::Rk4, 1));
+        let amp = 1e-3;
+        let mut q = JointVector::zeros();
+        q[0] = -std::f64::consts::FRAC_PI_2 + amp;
+        s.set_state(&q, &JointVector::zeros());
+        let omega = (9.81f64 / 0.5).sqrt();
+        let dt = 1e-3;
+        let n = 2000;
+        for _ in 0..n {
+            s.write(&JointVector::zeros(), dt).unwrap();
+        }
+        let expect = -std::f64::consts::FRAC_PI_2 + amp * (omega * dt * n as f64).cos();
+        let (q, _) = s.true_state();
+        // Nonlinearity at 1 mrad amplitude is ~amp³ scale; integrator error far below.
+        assert!((q[0] - expect).abs() < 1e-8, "q {} vs {}", q[0], expect);
+    }
+
+    #[test]
+    fn torque_saturates_at_the_effort_limit_and_is_flagged() {
+        let robot = pendulum(0.0);
+        let mut s = active(&robot, &sim_cfg(Integrator::Rk4, 1));
+        let mut tau = JointVector::zeros();
+        tau[0] = 100.0;
+        s.write(&tau, 1e-3).unwrap();
+        let m = s.read().unwrap();
+        assert!(m.saturated);
+        assert_eq!(m.tau_applied[0], 20.0);
+    }
+
+    #[test]
+    fn inactive_arm_refuses_torque_and_stays_put() {
+        let robot = pendulum(-9.81);
+        let mut s = SimArm::new(&robot, &sim_cfg(Integrator::Rk4, 1), &JointVector::zeros());
+        s.configure().unwrap();
+        assert!(s.write(&JointVector::zeros(), 1e-3).is_err());
+        assert_eq!(s.read().unwrap().q[0], 0.0);
+    }
+
+    #[test]
+    fn noise_is_seeded_and_reproducible() {
+        let robot = pendulum(0.0);
+        let mut c = sim_cfg(Integrator::Rk4, 1);
+        c.sensor_noise_rad = 1e-3;
+        let mut a = active(&robot, &c);
+        let mut b = active(&robot, &c);
+        for _ in 0..10 {
+            assert_eq!(a.read().unwrap(), b.read().unwrap());
+        }
+        assert_ne!(a.read().unwrap().q[0], 0.0);
+    }
+
+    #[test]
+    fn heavier_links_accelerate_less() {
+        let robot = pendulum(0.0);
+        let mut c = sim_cfg(Integrator::Rk4, 1);
+        c.mass_scale = 2.0;
+        let mut s = active(&robot, &c);
+        let mut tau = JointVector::zeros();
+        tau[0] = 1.0;
+        s.write(&tau, 1e-3).unwrap();
+        let (_, qd) = s.true_state();
+        assert!((qd[0] - 2e-3).abs() < 1e-12);
+    }
+}

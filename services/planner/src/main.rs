@@ -1,0 +1,21 @@
+//! `microrobot-planner --config FILE`: the planner service as a standalone binary
+//! (the supervisor runs the same code as `microrobot service planner`).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    let mut args = std::env::args().skip(1);
+    let config = match (args.next().as_deref(), args.next()) {
+        (Some("--config"), Some(p)) => PathBuf::from(p),
+        _ => {
+            eprintln!("usage: microrobot-planner --config FILE");
+            return ExitCode::from(microrobot_runtime::exit_code::BAD_CONFIG);
+        }
+    };
+    microrobot_runtime::service_main(
+        microrobot_runtime::ServiceRole::Planner,
+        &config,
+        microrobot_planner::run,
+    )
+}

@@ -1,0 +1,1173 @@
+//! The pipeline configuration (`config/pipeline.toml`): every key checked, units in
+//! the key names converted once at load, relative paths resolved against the file's
+//! directory. `config/pipeline.README.md` documents every key.
+//!
+//! Errors name the file and the full key path (`watchdog.stale_ms`), so a user finds
+//! the typo. Unknown keys, wrong types, non-finite numbers and out-of-range values are
+//! all refused; nothing is silently defaulted except keys that are absent.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use toml::{Table, Value};
+
+/// Why a pipeline config was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{file}: {}{message}", key.as_deref().map(|k| format!("{k}: ")).unwrap_or_default())]
+pub struct ConfigError {
+    /// File name (or other origin) of the config text.
+    pub file: String,
+    /// Key path the error is about (`None` for I/O and TOML syntax errors).
+    pub key: Option<String>,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl ConfigError {
+    fn at(file: &str, key: &str, message: impl Into<String>) -> Self {
+        Self {
+            file: file.to_string(),
+            key: Some(key.to_string()),
+            message: message.into(),
+        }
+    }
+}
+
+/// What the actuator does when it latches its safe state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SafeStateMode {
+    /// Hold the position measured at the latch under the actuator's own PD (gravity compensated).
+    Hold,
+    /// Damp every joint to rest (gravity compensated), then hold where it stopped.
+    Damp,
+}
+
+/// What the planner's clock does after it woke more than one period late.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OverrunPolicy {
+    /// Drop the missed ticks and continue on the grid (motion time jumps by the missed periods).
+    Skip,
+    /// Run one tick per missed period, back to back, until on time again.
+    CatchUp,
+}
+
+/// Numerical integrator of the simulated arm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Integrator {
+    /// Classic 4th-order Runge-Kutta on (q, qd) with the torque held constant.
+    Rk4,
+    /// Semi-implicit (symplectic) Euler: qd += qdd·h, then q += qd·h.
+    SemiImplicitEuler,
+}
+
+/// Actuator backend kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BackendKind {
+    /// The simulated arm (forward dynamics of the robot model).
+    Sim,
+}
+
+/// What the supervisor does when a service dies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailurePolicy {
+    /// Restart the failed service, up to `max_restarts` times.
+    Restart,
+    /// Stop the whole pipeline.
+    StopAll,
+}
+
+/// Watchdog thresholds (`[watchdog]`), shared by every stage.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WatchdogConfig {
+    /// Input older than this is stale: flagged, counted, and the stage holds (ms).
+    pub stale_ms: f64,
+    /// Torque commands missing this long latch the actuator's safe state (ms).
+    pub fault_ms: f64,
+    /// Hold position or damp to rest in the safe state.
+    pub safe_state: SafeStateMode,
+    /// Leave the safe state by itself once commands are fresh again (else only a Reset).
+    pub auto_resume: bool,
+    /// Time over which the actuator blends into and out of its own control law (ms).
+    pub ramp_ms: f64,
+}
+
+/// `[planner]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannerConfig {
+    /// How long to wait at start for the actuator's first measured state (ms).
+    pub state_timeout_ms: f64,
+    /// Scale (0, 1] of the robot's velocity/acceleration/jerk limits for the program and
+    /// for commands that give no scale.
+    pub limit_scale: f64,
+    /// Scale (0, 1] of the limits for the e-stop's jerk-limited brake (1 = the full limits).
+    pub estop_limit_scale: f64,
+    /// A Move command with a stamp older than this is refused as stale (ms).
+    pub command_max_age_ms: f64,
+}
+
+/// `[dynamics]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DynamicsConfig {
+    /// Computed-torque feedback on the measured state (false: feed-forward RNEA only).
+    pub feedback: bool,
+    /// Position gain Kp (1/s²).
+    pub kp_per_s2: f64,
+    /// Velocity gain Kd (1/s).
+    pub kd_per_s: f64,
+}
+
+/// `[actuator.sim]`: the simulated arm.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimConfig {
+    /// Link masses and inertias multiplied by this (1.1 = links 10 % heavier than the model).
+    pub mass_scale: f64,
+    /// Extra viscous friction on every joint, unknown to the dynamics (N·m·s/rad).
+    pub viscous_friction_nms: f64,
+    /// Extra Coulomb friction on every joint, unknown to the dynamics (N·m).
+    pub coulomb_friction_nm: f64,
+    /// Standard deviation of Gaussian noise on measured positions (rad).
+    pub sensor_noise_rad: f64,
+    /// Standard deviation of Gaussian noise on measured velocities (rad/s).
+    pub sensor_noise_rad_s: f64,
+    /// Integrator.
+    pub integrator: Integrator,
+    /// Integrator substeps per plant step.
+    pub substeps: u32,
+    /// Seed of the noise generator (same seed, same noise).
+    pub seed: u64,
+    /// Initial joint positions (deg, or mm for prismatic joints); `None`: all zero
+    /// (clamped into the joint limits). Converted to SI by the simulator.
+    pub initial_q_deg: Option<Vec<f64>>,
+}
+
+/// `[actuator]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ActuatorConfig {
+    /// Backend kind.
+    pub backend: BackendKind,
+    /// External driver process run by the supervisor in place of the actuator service
+    /// (program and arguments); `None`: the built-in actuator service.
+    pub command: Option<Vec<String>>,
+    /// Safe-state hold gain (1/s²).
+    pub hold_kp_per_s2: f64,
+    /// Safe-state hold / damping gain (1/s).
+    pub hold_kd_per_s: f64,
+    /// The simulated arm.
+    pub sim: SimConfig,
+}
+
+/// `[realtime]`: per-process real-time settings, each falling back with one warning.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RealtimeConfig {
+    /// CPUs to pin every service to (empty: no pinning).
+    pub cpu_affinity: Vec<usize>,
+    /// Hold `/dev/cpu_dma_latency` open at `pm_qos_latency_us` while running.
+    pub pm_qos: bool,
+    /// The PM QoS latency request (µs).
+    pub pm_qos_latency_us: u32,
+    /// `prctl(PR_SET_TIMERSLACK)` in ns (0: leave the kernel default of 50 µs).
+    pub timer_slack_ns: u64,
+    /// SCHED_FIFO priority 1..=99, 0: stay SCHED_OTHER.
+    pub sched_fifo_priority: u32,
+    /// `mlockall(MCL_CURRENT | MCL_FUTURE)`.
+    pub mlockall: bool,
+    /// Planner overrun policy.
+    pub overrun: OverrunPolicy,
+}
+
+/// `[supervisor]`: read by `microrobot run`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SupervisorConfig {
+    /// How long each service may take to report ready (ms).
+    pub ready_timeout_ms: f64,
+    /// How long services get to exit after SIGTERM before SIGKILL (ms).
+    pub stop_timeout_ms: f64,
+    /// Restart a failed service or stop everything.
+    pub on_failure: FailurePolicy,
+    /// Restarts allowed per service with `on_failure = "restart"`.
+    pub max_restarts: u32,
+}
+
+/// The whole pipeline configuration, fully validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PipelineConfig {
+    /// Instance name: the service-name prefix (`[A-Za-z0-9_-]`, 1..=64 chars).
+    pub instance: String,
+    /// Control rate (Hz).
+    pub rate_hz: f64,
+    /// Run time limit (s); `None`: until the program is done (or forever without one).
+    pub duration_s: Option<f64>,
+    /// Robot description file (absolute after load).
+    pub robot: PathBuf,
+    /// Motion program file (absolute after load).
+    pub program: Option<PathBuf>,
+    /// Lockstep: logical time, one plant step per torque command, reproducible runs.
+    pub lockstep: bool,
+    /// Status publishing period (ms).
+    pub status_period_ms: f64,
+    pub watchdog: WatchdogConfig,
+    pub planner: PlannerConfig,
+    pub dynamics: DynamicsConfig,
+    pub actuator: ActuatorConfig,
+    pub realtime: RealtimeConfig,
+    pub supervisor: SupervisorConfig,
+}
+
+impl Default for PipelineConfig {
+    /// The built-in defaults (what an empty file gives), with `robot` relative.
+    fn default() -> Self {
+        Self {
+            instance: "default".into(),
+            rate_hz: 1000.0,
+            duration_s: None,
+            robot: PathBuf::from("robots/seed-arm.toml"),
+            program: None,
+            lockstep: false,
+            status_period_ms: 100.0,
+            watchdog: WatchdogConfig {
+                stale_ms: 50.0,
+                fault_ms: 200.0,
+                safe_state: SafeStateMode::Hold,
+                auto_resume: false,
+                ramp_ms: 20.0,
+            },
+            planner: PlannerConfig {
+                state_timeout_ms: 5000.0,
+                limit_scale: 1.0,
+                estop_limit_scale: 1.0,
+                command_max_age_ms: 1000.0,
+            },
+            dynamics: DynamicsConfig {
+                feedback: true,
+                kp_per_s2: 2500.0,
+                kd_per_s: 100.0,
+            },
+            actuator: ActuatorConfig {
+                backend: BackendKind::Sim,
+                command: None,
+                hold_kp_per_s2: 400.0,
+                hold_kd_per_s: 40.0,
+                sim: SimConfig {
+                    mass_scale: 1.0,
+                    viscous_friction_nms: 0.0,
+                    coulomb_friction_nm: 0.0,
+                    sensor_noise_rad: 0.0,
+                    sensor_noise_rad_s: 0.0,
+                    integrator: Integrator::Rk4,
+                    substeps: 2,
+                    seed: 1,
+                    initial_q_deg: None,
+                },
+            },
+            realtime: RealtimeConfig {
+                cpu_affinity: vec![1],
+                pm_qos: true,
+                pm_qos_latency_us: 0,
+                timer_slack_ns: 1,
+                sched_fifo_priority: 0,
+                mlockall: true,
+                overrun: OverrunPolicy::Skip,
+            },
+            supervisor: SupervisorConfig {
+                ready_timeout_ms: 10000.0,
+                stop_timeout_ms: 3000.0,
+                on_failure: FailurePolicy::StopAll,
+                max_restarts: 3,
+            },
+        }
+    }
+}
+
+impl PipelineConfig {
+    /// Reads and validates a pipeline config file; relative paths inside are resolved
+    /// against the file's directory. Errors name the file and the key.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let origin = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+            file: origin.clone(),
+            key: None,
+            message: format!("cannot read: {e}"),
+        })?;
+        let base = path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| PathBuf::from("."));
+        let base = if base.as_os_str().is_empty() {
+            PathBuf::from(".")
+        } else {
+            base
+        };
+        Self::from_toml_str(&text, &origin, &base)
+    }
+
+    /// Parses and validates config text; `origin` names it in errors, `base_dir` resolves
+    /// relative paths (made absolute when `base_dir` exists).
+    pub fn from_toml_str(text: &str, origin: &str, base_dir: &Path) -> Result<Self, ConfigError> {
+        let table: Table = text.parse().map_err(|e: toml::de::Error| ConfigError {
+            file: origin.to_string(),
+            key: None,
+            message: format!("invalid TOML: {}", e.to_string().trim()),
+        })?;
+        let r = Reader { file: origin };
+        let base = std::fs::canonicalize(base_dir).unwrap_or_else(|_| base_dir.to_path_buf());
+        r.pipeline(&table, &base)
+    }
+
+    /// The control period in ns (`1e9 / rate_hz`, rounded).
+    pub fn period_ns(&self) -> u64 {
+        (1e9 / self.rate_hz).round() as u64
+    }
+
+    /// Serialises the (validated) config back to TOML with absolute paths, so the text
+    /// is self-contained: `from_toml_str(to_toml_string())` gives the same config.
+    pub fn to_toml_string(&self) -> String {
+        let mut s = String::new();
+        let f = |v: f64| fmt_f64(v);
+        let _ = writeln!(s, "instance = {}", quote(&self.instance));
+        let _ = writeln!(s, "rate_hz = {}", f(self.rate_hz));
+        if let Some(d) = self.duration_s {
+            let _ = writeln!(s, "duration_s = {}", f(d));
+        }
+        let _ = writeln!(s, "robot = {}", quote(&self.robot.to_string_lossy()));
+        if let Some(p) = &self.program {
+            let _ = writeln!(s, "program = {}", quote(&p.to_string_lossy()));
+        }
+        let _ = writeln!(s, "lockstep = {}", self.lockstep);
+        let _ = writeln!(s, "status_period_ms = {}", f(self.status_period_ms));
+        let w = &self.watchdog;
+        let _ = writeln!(s, "\n[watchdog]");
+        let _ = writeln!(s, "stale_ms = {}", f(w.stale_ms));
+        let _ = writeln!(s, "fault_ms = {}", f(w.fault_ms));
+        let _ = writeln!(
+            s,
+            "safe_state = {}",
+            quote(match w.safe_state {
+                SafeStateMode::Hold => "hold",
+                SafeStateMode::Damp => "damp",
+            })
+        );
+        let _ = writeln!(s, "auto_resume = {}", w.auto_resume);
+        let _ = writeln!(s, "ramp_ms = {}", f(w.ramp_ms));
+        let p = &self.planner;
+        let _ = writeln!(s, "\n[planner]");
+        let _ = writeln!(s, "state_timeout_ms = {}", f(p.state_timeout_ms));
+        let _ = writeln!(s, "limit_scale = {}", f(p.limit_scale));
+        let _ = writeln!(s, "estop_limit_scale = {}", f(p.estop_limit_scale));
+        let _ = writeln!(s, "command_max_age_ms = {}", f(p.command_max_age_ms));
+        let d = &self.dynamics;
+        let _ = writeln!(s, "\n[dynamics]");
+        let _ = writeln!(s, "feedback = {}", d.feedback);
+        let _ = writeln!(s, "kp_per_s2 = {}", f(d.kp_per_s2));
+        let _ = writeln!(s, "kd_per_s = {}", f(d.kd_per_s));
+        let a = &self.actuator;
+        let _ = writeln!(s, "\n[actuator]");
+        let _ = writeln!(s, "backend = \"sim\"");
+        if let Some(cmd) = &a.command {
+            let items: Vec<String> = cmd.iter().map(|c| quote(c)).collect();
+            let _ = writeln!(s, "command = [{}]", items.join(", "));
+        }
+        let _ = writeln!(s, "hold_kp_per_s2 = {}", f(a.hold_kp_per_s2));
+        let _ = writeln!(s, "hold_kd_per_s = {}", f(a.hold_kd_per_s));
+        let m = &a.sim;
+        let _ = writeln!(s, "\n[actuator.sim]");
+        let _ = writeln!(s, "mass_scale = {}", f(m.mass_scale));
+        let _ = writeln!(s, "viscous_friction_nms = {}", f(m.viscous_friction_nms));
+        let _ = writeln!(s, "coulomb_friction_nm = {}", f(m.coulomb_friction_nm));
+        let _ = writeln!(s, "sensor_noise_rad = {}", f(m.sensor_noise_rad));
+        let _ = writeln!(s, "sensor_noise_rad_s = {}", f(m.sensor_noise_rad_s));
+        let _ = writeln!(
+            s,
+            "integrator = {}",
+            quote(match m.integrator {
+                Integrator::Rk4 => "rk4",
+                Integrator::SemiImplicitEuler => "semi_implicit_euler",
+            })
+        );
+        let _ = writeln!(s, "substeps = {}", m.substeps);
+        let _ = writeln!(s, "seed = {}", m.seed);
+        if let Some(q) = &m.initial_q_deg {
+            let items: Vec<String> = q.iter().map(|v| f(*v)).collect();
+            let _ = writeln!(s, "initial_q_deg = [{}]", items.join(", "));
+        }
+        let r = &self.realtime;
+        let _ = writeln!(s, "\n[realtime]");
+        let cpus: Vec<String> = r.cpu_affinity.iter().map(|c| c.to_string()).collect();
+        let _ = writeln!(s, "cpu_affinity = [{}]", cpus.join(", "));
+        let _ = writeln!(s, "pm_qos = {}", r.pm_qos);
+        let _ = writeln!(s, "pm_qos_latency_us = {}", r.pm_qos_latency_us);
+        let _ = writeln!(s, "timer_slack_ns = {}", r.timer_slack_ns);
+        let _ = writeln!(s, "sched_fifo_priority = {}", r.sched_fifo_priority);
+        let _ = writeln!(s, "mlockall = {}", r.mlockall);
+        let _ = writeln!(
+            s,
+            "overrun = {}",
+            quote(match r.overrun {
+                OverrunPolicy::Skip => "skip",
+                OverrunPolicy::CatchUp => "catch_up",
+            })
+        );
+        let v = &self.supervisor;
+        let _ = writeln!(s, "\n[supervisor]");
+        let _ = writeln!(s, "ready_timeout_ms = {}", f(v.ready_timeout_ms));
+        let _ = writeln!(s, "stop_timeout_ms = {}", f(v.stop_timeout_ms));
+        let _ = writeln!(
+            s,
+            "on_failure = {}",
+            quote(match v.on_failure {
+                FailurePolicy::Restart => "restart",
+                FailurePolicy::StopAll => "stop_all",
+            })
+        );
+        let _ = writeln!(s, "max_restarts = {}", v.max_restarts);
+        s
+    }
+}
+
+/// Shortest text that parses back to exactly `v` (always with a decimal point or exponent).
+fn fmt_f64(v: f64) -> String {
+    let s = format!("{v:?}");
+    if s.contains('.') || s.contains('e') || s.contains("inf") || s.contains("NaN") {
+        s
+    } else {
+        format!("{s}.0")
+    }
+}
+
+fn quote(s: &str) -> String {
+    Value::String(s.to_string()).to_string()
+}
+
+fn join(path: &str, key: &str) -> String {
+    if path.is_empty() {
+        key.to_string()
+    } else {
+        format!("{path}.{key}")
+    }
+}
+
+/// A table being read: remembers which keys were consumed so leftovers are refused.
+struct Tab<'t> {
+    path: String,
+    table: Option<&'t Table>,
+    allowed: &'static [&'static str],
+}
+
+struct Reader<'a> {
+    file: &'a str,
+}
+
+type Res<T> = Result<T, ConfigError>;
+
+impl Reader<'_> {
+    fn err(&self, key: &str, message: impl Into<String>) -> ConfigError {
+        ConfigError::at(self.file, key, message)
+    }
+
+    fn tab<'t>(
+        &self,
+        parent: &'t Table,
+        path: &str,
+        key: &str,
+        allowed: &'static [&'static str],
+    ) -> Res<Tab<'t>> {
+        let full = join(path, key);
+        let table = match parent.get(key) {
+            None => None,
+            Some(Value::Table(t)) => Some(t),
+            Some(_) => return Err(self.err(&full, "expected a table")),
+        };
+        let tab = Tab {
+            path: full,
+            table,
+            allowed,
+        };
+        self.check_unknown(&tab)?;
+        Ok(tab)
+    }
+
+    fn check_unknown(&self, tab: &Tab<'_>) -> Res<()> {
+        if let Some(t) = tab.table {
+            for k in t.keys() {
+                if !tab.allowed.contains(&k.as_str()) {
+                    return Err(self.err(
+                        &join(&tab.path, k),
+                        format!("unknown key (expected one of: {})", tab.allowed.join(", ")),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn get<'t>(&self, tab: &Tab<'t>, key: &str) -> Option<&'t Value> {
+        tab.table.and_then(|t| t.get(key))
+    }
+
+    fn f64_in(
+        &self,
+        tab: &Tab<'_>,
+        key: &str,
+        default: f64,
+        lo: f64,
+        hi: f64,
+        lo_open: bool,
+    ) -> Res<f64> {
+        let k = join(&tab.path, key);
+        let v = match self.get(tab, key) {
+            None => return Ok(default),
+            Some(Value::Float(v)) => *v,
+            Some(Value::Integer(i)) => *i as f64,
+            Some(_) => return Err(self.err(&k, "expected a number")),
+        };
+        if !v.is_finite() {
+            return Err(self.err(&k, format!("{v} is not a finite number")));
+        }
+        let below = if lo_open { v <= lo } else { v < lo };
+        if below || v > hi {
+            let open = if lo_open { "(" } else { "[" };
+            return Err(self.err(&k, format!("{v} is out of range {open}{lo}, {hi}]")));
+        }
+        Ok(v)
+    }
+
+    fn opt_f64_in(&self, tab: &Tab<'_>, key: &str, lo: f64, hi: f64) -> Res<Option<f64>> {
+        match self.get(tab, key) {
+            None => Ok(None),
+            Some(_) => self.f64_in(tab, key, 0.0, lo, hi, true).map(Some),
+        }
+    }
+
+    fn u64_in(&self, tab: &Tab<'_>, key: &str, default: u64, lo: u64, hi: u64) -> Res<u64> {
+        let k = join(&tab.path, key);
+        match self.get(tab, key) {
+            None => Ok(default),
+            Some(Value::Integer(i)) => {
+                if *i < 0 || (*i as u64) < lo || (*i as u64) > hi {
+                    Err(self.err(&k, format!("{i} is out of range [{lo}, {hi}]")))
+                } else {
+                    Ok(*i as u64)
+                }
+            }
+            Some(_) => Err(self.err(&k, "expected an integer")),
+        }
+    }
+
+    fn bool(&self, tab: &Tab<'_>, key: &str, default: bool) -> Res<bool> {
+        match self.get(tab, key) {
+            None => Ok(default),
+            Some(Value::Boolean(b)) => Ok(*b),
+            Some(_) => Err(self.err(&join(&tab.path, key), "expected true or false")),
+        }
+    }
+
+    fn string(&self, tab: &Tab<'_>, key: &str) -> Res<Option<String>> {
+        match self.get(tab, key) {
+            None => Ok(None),
+            Some(Value::String(s)) => Ok(Some(s.clone())),
+            Some(_) => Err(self.err(&join(&tab.path, key), "expected a string")),
+        }
+    }
+
+    fn choice<T: Copy>(
+        &self,
+        tab: &Tab<'_>,
+        key: &str,
+        default: T,
+        options: &[(&str, T)],
+    ) -> Res<T> {
+        match self.string(tab, key)? {
+            None => Ok(default),
+            Some(s) => options
+                .iter()
+                .find(|(n, _)| *n == s)
+                .map(|(_, v)| *v)
+                .ok_or_else(|| {
+                    let names: Vec<&str> = options.iter().map(|(n, _)| *n).collect();
+                    self.err(
+                        &join(&tab.path, key),
+                        format!("`{s}` is not one of: {}", names.join(", ")),
+                    )
+                }),
+        }
+    }
+
+    fn path(
+        &self,
+        tab: &Tab<'_>,
+        key: &str,
+        base: &Path,
+        must_exist: bool,
+    ) -> Res<Option<PathBuf>> {
+        let Some(s) = self.string(tab, key)? else {
+            return Ok(None);
+        };
+        let k = join(&tab.path, key);
+        if s.is_empty() {
+            return Err(self.err(&k, "empty path"));
+        }
+        let p = PathBuf::from(&s);
+        let p = if p.is_absolute() { p } else { base.join(p) };
+        if must_exist && !p.is_file() {
+            return Err(self.err(&k, format!("file `{}` does not exist", p.display())));
+        }
+        Ok(Some(p))
+    }
+
+    fn pipeline(&self, root: &Table, base: &Path) -> Res<PipelineConfig> {
+        let d = PipelineConfig::default();
+        let top = Tab {
+            path: String::new(),
+            table: Some(root),
+            allowed: &[
+                "instance",
+                "rate_hz",
+                "duration_s",
+                "robot",
+                "program",
+                "lockstep",
+                "status_period_ms",
+                "watchdog",
+                "planner",
+                "dynamics",
+                "actuator",
+                "realtime",
+                "supervisor",
+            ],
+        };
+        self.check_unknown(&top)?;
+        let instance = self.string(&top, "instance")?.unwrap_or(d.instance.clone());
+        if instance.is_empty()
+            || instance.len() > 64
+            || !instance
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        {
+            return Err(self.err(
+                "instance",
+                format!("`{instance}` must be 1 to 64 characters of A-Z a-z 0-9 _ -"),
+            ));
+        }
+        let rate_hz = self.f64_in(&top, "rate_hz", d.rate_hz, 1.0, 10_000.0, false)?;
+        let duration_s = self.opt_f64_in(&top, "duration_s", 0.0, 1.0e7)?;
+        let robot = match self.path(&top, "robot", base, true)? {
+            Some(p) => p,
+            None => {
+                let p = base.join(&d.robot);
+                if !p.is_file() {
+                    return Err(self.err(
+                        "robot",
+                        format!("missing, and the default `{}` does not exist", p.display()),
+                    ));
+                }
+                p
+            }
+        };
+        let program = self.path(&top, "program", base, true)?;
+        let lockstep = self.bool(&top, "lockstep", d.lockstep)?;
+        let status_period_ms = self.f64_in(
+            &top,
+            "status_period_ms",
+            d.status_period_ms,
+            10.0,
+            10_000.0,
+            false,
+        )?;
+
+        let t = self.tab(
+            root,
+            "",
+            "watchdog",
+            &[
+                "stale_ms",
+                "fault_ms",
+                "safe_state",
+                "auto_resume",
+                "ramp_ms",
+            ],
+        )?;
+        let dw = &d.watchdog;
+        let stale_ms = self.f64_in(&t, "stale_ms", dw.stale_ms, 0.0, 60_000.0, true)?;
+        let fault_ms = self.f64_in(&t, "fault_ms", dw.fault_ms, 0.0, 60_000.0, true)?;
+        if fault_ms < stale_ms {
+            return Err(self.err(
+                "watchdog.fault_ms",
+                format!("{fault_ms} must be >= watchdog.stale_ms ({stale_ms})"),
+            ));
+        }
+        let period_ms = 1000.0 / rate_hz;
+        if stale_ms < 2.0 * period_ms {
+            return Err(self.err(
+                "watchdog.stale_ms",
+                format!(
+                    "{stale_ms} must be at least two control periods ({:.3} ms)",
+                    2.0 * period_ms
+                ),
+            ));
+        }
+        let watchdog = WatchdogConfig {
+            stale_ms,
+            fault_ms,
+            safe_state: self.choice(
+                &t,
+                "safe_state",
+                dw.safe_state,
+                &[("hold", SafeStateMode::Hold), ("damp", SafeStateMode::Damp)],
+            )?,
+            auto_resume: self.bool(&t, "auto_resume", dw.auto_resume)?,
+            ramp_ms: self.f64_in(&t, "ramp_ms", dw.ramp_ms, 0.0, 10_000.0, false)?,
+        };
+
+        let t = self.tab(
+            root,
+            "",
+            "planner",
+            &[
+                "state_timeout_ms",
+                "limit_scale",
+                "estop_limit_scale",
+                "command_max_age_ms",
+            ],
+        )?;
+        let dp = &d.planner;
+        let planner = PlannerConfig {
+            state_timeout_ms: self.f64_in(
+                &t,
+                "state_timeout_ms",
+                dp.state_timeout_ms,
+                0.0,
+                600_000.0,
+                true,
+            )?,
+            limit_scale: self.f64_in(&t, "limit_scale", dp.limit_scale, 0.0, 1.0, true)?,
+            estop_limit_scale: self.f64_in(
+                &t,
+                "estop_limit_scale",
+                dp.estop_limit_scale,
+                0.0,
+                1.0,
+                true,
+            )?,
+            command_max_age_ms: self.f64_in(
+                &t,
+                "command_max_age_ms",
+                dp.command_max_age_ms,
+                0.0,
+                3_600_000.0,
+                true,
+            )?,
+        };
+
+        let t = self.tab(root, "", "dynamics", &["feedback", "kp_per_s2", "kd_per_s"])?;
+        let dd = &d.dynamics;
+        let dynamics = DynamicsConfig {
+            feedback: self.bool(&t, "feedback", dd.feedback)?,
+            kp_per_s2: self.f64_in(&t, "kp_per_s2", dd.kp_per_s2, 0.0, 1.0e7, false)?,
+            kd_per_s: self.f64_in(&t, "kd_per_s", dd.kd_per_s, 0.0, 1.0e5, false)?,
+        };
+        // Discrete stability of the computed-torque loop at this rate (one-period delay).
+        if dynamics.kd_per_s / rate_hz > 1.0 || dynamics.kp_per_s2 / (rate_hz * rate_hz) > 0.5 {
+            return Err(self.err(
+                "dynamics.kp_per_s2",
+                format!(
+                    "gains Kp {} /s², Kd {} /s are too high for {rate_hz} Hz (need Kd/rate <= 1, Kp/rate² <= 0.5)",
+                    dynamics.kp_per_s2, dynamics.kd_per_s
+                ),
+            ));
+        }
+
+        let t = self.tab(
+            root,
+            "",
+            "actuator",
+            &[
+                "backend",
+                "command",
+                "hold_kp_per_s2",
+                "hold_kd_per_s",
+                "sim",
+            ],
+        )?;
+        let da = &d.actuator;
+        let backend = self.choice(&t, "backend", da.backend, &[("sim", BackendKind::Sim)])?;
+        let command = match self.get(&t, "command") {
+            None => None,
+            Some(Value::Array(items)) => {
+                let mut out = Vec::with_capacity(items.len());
+                for (i, it) in items.iter().enumerate() {
+                    match it {
+                        Value::String(s) if !s.is_empty() => out.push(s.clone()),
+                        _ => {
+                            return Err(self.err(
+                                &format!("actuator.command[{i}]"),
+                                "expected a non-empty string",
+                            ));
+                        }
+                    }
+                }
+                if out.is_empty() {
+                    return Err(self.err("actuator.command", "must name a program"));
+                }
+                Some(out)
+            }
+            Some(_) => return Err(self.err("actuator.command", "expected an array of strings")),
+        };
+        let hold_kp_per_s2 =
+            self.f64_in(&t, "hold_kp_per_s2", da.hold_kp_per_s2, 0.0, 1.0e7, false)?;
+        let hold_kd_per_s = self.f64_in(&t, "hold_kd_per_s", da.hold_kd_per_s, 0.0, 1.0e5, true)?;
+        let empty = Table::new();
+        let s = self.tab(
+            t.table.unwrap_or(&empty),
+            "actuator",
+            "sim",
+            &[
+                "mass_scale",
+                "viscous_friction_nms",
+                "coulomb_friction_nm",
+                "sensor_noise_rad",
+                "sensor_noise_rad_s",
+                "integrator",
+                "substeps",
+                "seed",
+                "initial_q_deg",
+            ],
+        )?;
+        let ds = &da.sim;
+        let initial_q_deg = match self.get(&s, "initial_q_deg") {
+            None => None,
+            Some(Value::Array(items)) => {
+                if items.is_empty() || items.len() > 8 {
+                    return Err(self.err("actuator.sim.initial_q_deg", "expected 1 to 8 numbers"));
+                }
+                let mut out = Vec::with_capacity(items.len());
+                for (i, it) in items.iter().enumerate() {
+                    let k = format!("actuator.sim.initial_q_deg[{i}]");
+                    let v = match it {
+                        Value::Float(v) => *v,
+                        Value::Integer(v) => *v as f64,
+                        _ => return Err(self.err(&k, "expected a number")),
+                    };
+                    if !v.is_finite() {
+                        return Err(self.err(&k, format!("{v} is not a finite number")));
+                    }
+                    out.push(v);
+                }
+                Some(out)
+            }
+            Some(_) => {
+                return Err(self.err("actuator.sim.initial_q_deg", "expected an array of numbers"));
+            }
+        };
+        let sim = SimConfig {
+            mass_scale: self.f64_in(&s, "mass_scale", ds.mass_scale, 0.1, 10.0, false)?,
+            viscous_friction_nms: self.f64_in(
+                &s,
+                "viscous_friction_nms",
+                ds.viscous_friction_nms,
+                0.0,
+                1.0e4,
+                false,
+            )?,
+            coulomb_friction_nm: self.f64_in(
+                &s,
+                "coulomb_friction_nm",
+                ds.coulomb_friction_nm,
+                0.0,
+                1.0e4,
+                false,
+            )?,
+            sensor_noise_rad: self.f64_in(
+                &s,
+                "sensor_noise_rad",
+                ds.sensor_noise_rad,
+                0.0,
+                1.0,
+                false,
+            )?,
+            sensor_noise_rad_s: self.f64_in(
+                &s,
+                "sensor_noise_rad_s",
+                ds.sensor_noise_rad_s,
+                0.0,
+                10.0,
+                false,
+            )?,
+            integrator: self.choice(
+                &s,
+                "integrator",
+                ds.integrator,
+                &[
+                    ("rk4", Integrator::Rk4),
+                    ("semi_implicit_euler", Integrator::SemiImplicitEuler),
+                ],
+            )?,
+            substeps: self.u64_in(&s, "substeps", ds.substeps as u64, 1, 1000)? as u32,
+            seed: self.u64_in(&s, "seed", ds.seed, 0, i64::MAX as u64)?,
+            initial_q_deg,
+        };
+        let actuator = ActuatorConfig {
+            backend,
+            command,
+            hold_kp_per_s2,
+            hold_kd_per_s,
+            sim,
+        };
+
+        let t = self.tab(
+            root,
+            "",
+            "realtime",
+            &[
+                "cpu_affinity",
+                "pm_qos",
+                "pm_qos_latency_us",
+                "timer_slack_ns",
+                "sched_fifo_priority",
+                "mlockall",
+                "overrun",
+            ],
+        )?;
+        let dr = &d.realtime;
+        let cpu_affinity = match self.get(&t, "cpu_affinity") {
+            None => dr.cpu_affinity.clone(),
+            Some(Value::Array(items)) => {
+                let mut out = Vec::with_capacity(items.len());
+                for (i, it) in items.iter().enumerate() {
+                    match it {
+                        Value::Integer(c) if (0..1024).contains(c) => out.push(*c as usize),
+                        _ => {
+                            return Err(self.err(
+                                &format!("realtime.cpu_affinity[{i}]"),
+                                "expected a CPU number 0..1023",
+                            ));
+                        }
+                    }
+                }
+                out
+            }
+            Some(_) => {
+                return Err(self.err("realtime.cpu_affinity", "expected an array of CPU numbers"));
+            }
+        };
+        let realtime = RealtimeConfig {
+            cpu_affinity,
+            pm_qos: self.bool(&t, "pm_qos", dr.pm_qos)?,
+            pm_qos_latency_us: self.u64_in(
+                &t,
+                "pm_qos_latency_us",
+                dr.pm_qos_latency_us as u64,
+                0,
+                1_000_000,
+            )? as u32,
+            timer_slack_ns: self.u64_in(
+                &t,
+                "timer_slack_ns",
+                dr.timer_slack_ns,
+                0,
+                1_000_000_000,
+            )?,
+            sched_fifo_priority: self.u64_in(
+                &t,
+                "sched_fifo_priority",
+                dr.sched_fifo_priority as u64,
+                0,
+                99,
+            )? as u32,
+            mlockall: self.bool(&t, "mlockall", dr.mlockall)?,
+            overrun: self.choice(
+                &t,
+                "overrun",
+                dr.overrun,
+                &[
+                    ("skip", OverrunPolicy::Skip),
+                    ("catch_up", OverrunPolicy::CatchUp),
+                ],
+            )?,
+        };
+
+        let t = self.tab(
+            root,
+            "",
+            "supervisor",
+            &[
+                "ready_timeout_ms",
+                "stop_timeout_ms",
+                "on_failure",
+                "max_restarts",
+            ],
+        )?;
+        let dv = &d.supervisor;
+        let supervisor = SupervisorConfig {
+            ready_timeout_ms: self.f64_in(
+                &t,
+                "ready_timeout_ms",
+                dv.ready_timeout_ms,
+                0.0,
+                600_000.0,
+                true,
+            )?,
+            stop_timeout_ms: self.f64_in(
+                &t,
+                "stop_timeout_ms",
+                dv.stop_timeout_ms,
+                0.0,
+                600_000.0,
+                true,
+            )?,
+            on_failure: self.choice(
+                &t,
+                "on_failure",
+                dv.on_failure,
+                &[
+                    ("restart", FailurePolicy::Restart),
+                    ("stop_all", FailurePolicy::StopAll),
+                ],
+            )?,
+            max_restarts: self.u64_in(&t, "max_restarts", dv.max_restarts as u64, 0, 1000)? as u32,
+        };
+
+        Ok(PipelineConfig {
+            instance,
+            rate_hz,
+            duration_s,
+            robot,
+            program,
+            lockstep,
+            status_period_ms,
+            watchdog,
+            planner,
+            dynamics,
+            actuator,
+            realtime,
+            supervisor,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir_with_robot() -> (PathBuf, PathBuf) {
+        let dir =
+            std::env::temp_dir().join(format!("mr-cfg-{}-{}", std::process::id(), rand_suffix()));
+        std::fs::create_dir_all(dir.join("robots")).unwrap();
+        let robot = dir.join("robots/seed-arm.toml");
+        std::fs::write(&robot, "# placeholder\n").unwrap();
+        (dir, robot)
+    }
+
+    fn rand_suffix() -> u64 {
+        use std::sync::atomic::{AtomicU64, Ordering};
+        static N: AtomicU64 = AtomicU64::new(0);
+        N.fetch_add(1, Ordering::Relaxed)
+    }
+
+    fn parse(text: &str) -> Result<PipelineConfig, ConfigError> {
+        let (dir, _) = dir_with_robot();
+        PipelineConfig::from_toml_str(text, "pipeline.toml", &dir)
+    }
+
+    fn err_key(text: &str) -> (Option<String>, String) {
+        let e = parse(text).unwrap_err();
+        assert_eq!(e.file, "pipeline.toml");
+        let msg = e.to_string();
+        assert!(msg.starts_with("pipeline.toml: "), "{msg}");
+        (e.key, msg)
+    }
+
+    #[test]
+    fn empty_file_gives_defaults_with_resolved_robot() {
+        let c = parse("").unwrap();
+        assert_eq!(c.rate_hz, 1000.0);
+        assert!(c.robot.is_absolute());
+        assert!(c.robot.ends_with("robots/seed-arm.toml"));
+        assert_eq!(c.watchdog.stale_ms, 50.0);
+        assert_eq!(c.realtime.cpu_affinity, vec![1]);
+    }
+
+    #[test]
+    fn unknown_key_is_refused_with_its_path() {
+        assert_eq!(err_key("rate = 5").0.as_deref(), Some("rate"));
+        assert_eq!(
+            err_key("[watchdog]\nstale = 5").0.as_deref(),
+            Some("watchdog.stale")
+        );
+        assert_eq!(
+            err_key("[actuator.sim]\nmass = 1.0").0.as_deref(),
+            Some("actuator.sim.mass")
+        );
+        assert_eq!(err_key("[bogus]").0.as_deref(), Some("bogus"));
+    }
+
+    #[test]
+    fn wrong_type_non_finite_and_out_of_range_name_the_key() {
+        assert_eq!(err_key("rate_hz = \"fast\"").0.as_deref(), Some("rate_hz"));
+        assert_eq!(err_key("rate_hz = nan").0.as_deref(), Some("rate_hz"));
+        assert_eq!(err_key("rate_hz = inf").0.as_deref(), Some("rate_hz"));
+        assert_eq!(err_key("rate_hz = 0").0.as_deref(), Some("rate_hz"));
+        assert_eq!(
+            err_key("[watchdog]\nstale_ms = -1").0.as_deref(),
+            Some("watchdog.stale_ms")
+        );
+        assert_eq!(
+            err_key("[watchdog]\nfault_ms = 10").0.as_deref(),
+            Some("watchdog.fault_ms")
+        );
+        assert_eq!(
+            err_key("[watchdog]\nsafe_state = \"run\"").0.as_deref(),
+            Some("watchdog.safe_state")
+        );
+        assert_eq!(
+            err_key("[dynamics]\nfeedback = 1").0.as_deref(),
+            Some("dynamics.feedback")
+        );
+        assert_eq!(
+            err_key("[realtime]\nsched_fifo_priority = 100")
+                .0
+                .as_deref(),
+            Some("realtime.sched_fifo_priority")
+        );
+        assert_eq!(
+            err_key("[actuator.sim]\nsubsteps = 0").0.as_deref(),
+            Some("actuator.sim.substeps")
+        );
+        assert_eq!(err_key("instance = \"a/b\"").0.as_deref(), Some("instance"));
+        assert_eq!(
+            err_key("program = \"nope.toml\"").0.as_deref(),
+            Some("program")
+        );
+        assert_eq!(
+            err_key("[planner]\nlimit_scale = 1.5").0.as_deref(),
+            Some("planner.limit_scale")
+        );
+    }
+
+    #[test]
+    fn syntax_error_names_the_file() {
+        let e = parse("rate_hz = = 3").unwrap_err();
+        assert_eq!(e.key, None);
+        assert!(e.to_string().contains("pipeline.toml"));
+    }
+
+    #[test]
+    fn too_high_gains_for_the_rate_are_refused() {
+        let (k, _) =
+            err_key("rate_hz = 100\n[watchdog]\nstale_ms = 50\n[dynamics]\nkp_per_s2 = 10000");
+        assert_eq!(k.as_deref(), Some("dynamics.kp_per_s2"));
+    }
+
+    #[test]
+    fn round_trip_through_toml_is_exact() {
+        let c = parse(
+            "instance = \"lab-1\"\nrate_hz = 4000.0\nduration_s = 2.5\nlockstep = true\n\
+             [watchdog]\nsafe_state = \"damp\"\nauto_resume = true\n\
+             [actuator]\ncommand = [\"drv\", \"--x\"]\n[actuator.sim]\nmass_scale = 1.1\ninitial_q_deg = [10, 20.5]\nintegrator = \"semi_implicit_euler\"\n\
+             [realtime]\ncpu_affinity = []\noverrun = \"catch_up\"\n[supervisor]\non_failure = \"restart\"",
+        )
+        .unwrap();
+        let text = c.to_toml_string();
+        let back =
+            PipelineConfig::from_toml_str(&text, "re.toml", Path::new("/nonexistent")).unwrap();
+        assert_eq!(back, c);
+    }
+}

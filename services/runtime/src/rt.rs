@@ -1,0 +1,147 @@
+//! Per-process real-time settings: CPU affinity, PM QoS (`/dev/cpu_dma_latency`), timer
+//! slack, SCHED_FIFO and mlockall. Each one is applied independently; one that is not
+//! permitted (or not possible on this machine) logs exactly one warning and the service
+//! goes on without it. Defaults are the measured best for this 2-vCPU VM
+//! (`notes/machine-floors.md`): all stages pinned to one CPU, PM QoS 0, 1 ns slack.
+
+use std::fs::File;
+use std::io::Write;
+
+use crate::config::RealtimeConfig;
+
+/// What was applied; keeps the PM QoS file open (the request lasts while it is open).
+#[derive(Debug, Default)]
+pub struct RtGuard {
+    pm_qos: Option<File>,
+    /// Settings that were applied, for the startup log line.
+    pub applied: Vec<&'static str>,
+    /// Settings that fell back (each was warned about once).
+    pub fallbacks: Vec<&'static str>,
+}
+
+impl RtGuard {
+    /// Whether the PM QoS request is being held.
+    pub fn pm_qos_held(&self) -> bool {
+        self.pm_qos.is_some()
+    }
+}
+
+fn errno() -> std::io::Error {
+    std::io::Error::last_os_error()
+}
+
+/// Applies `cfg` to the calling process (and, for the scheduler, its current thread).
+pub fn apply(cfg: &RealtimeConfig) -> RtGuard {
+    let mut g = RtGuard::default();
+    let note = |ok: Result<(), String>, name: &'static str, g: &mut RtGuard| match ok {
+        Ok(()) => g.applied.push(name),
+        Err(e) => {
+            tracing::warn!("real-time setting `{name}` not applied, continuing without it: {e}");
+            g.fallbacks.push(name);
+        }
+    };
+
+    if !cfg.cpu_affinity.is_empty() {
+        let r = set_affinity(&cfg.cpu_affinity);
+        note(r, "cpu_affinity", &mut g);
+    }
+    if cfg.pm_qos {
+        match File::options().write(true).open("/dev/cpu_dma_latency") {
+            Ok(mut f) => {
+                let v: i32 = cfg.pm_qos_latency_us as i32;
+                match f.write_all(&v.to_ne_bytes()) {
+                    Ok(()) => {
+                        g.pm_qos = Some(f);
+                        g.applied.push("pm_qos");
+                    }
+                    Err(e) => note(
+                        Err(format!("write /dev/cpu_dma_latency: {e}")),
+                        "pm_qos",
+                        &mut g,
+                    ),
+                }
+            }
+            Err(e) => note(
+                Err(format!("open /dev/cpu_dma_latency: {e}")),
+                "pm_qos",
+                &mut g,
+            ),
+        }
+    }
+    if cfg.timer_slack_ns > 0 {
+        // SAFETY: prctl with PR_SET_TIMERSLACK takes an unsigned long value.
+        let r = unsafe {
+            libc::prctl(
+                libc::PR_SET_TIMERSLACK,
+                cfg.timer_slack_ns as libc::c_ulong,
+                0,
+                0,
+                0,
+            )
+        };
+        note(
+            if r == 0 {
+                Ok(())
+            } else {
+                Err(format!("prctl(PR_SET_TIMERSLACK): {}", errno()))
+            },
+            "timer_slack_ns",
+            &mut g,
+        );
+    }
+    if cfg.mlockall {
+        // SAFETY: plain syscall, no pointers.
+        let r = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+        note(
+            if r == 0 {
+                Ok(())
+            } else {
+                Err(format!("mlockall: {}", errno()))
+            },
+            "mlockall",
+            &mut g,
+        );
+    }
+    if cfg.sched_fifo_priority > 0 {
+        let param = libc::sched_param {
+            sched_priority: cfg.sched_fifo_priority as i32,
+        };
+        // SAFETY: `param` is a valid sched_param; pid 0 is the calling thread.
+        let r = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+        note(
+            if r == 0 {
+                Ok(())
+            } else {
+                Err(format!("sched_setscheduler(SCHED_FIFO): {}", errno()))
+            },
+            "sched_fifo_priority",
+            &mut g,
+        );
+    }
+    g
+}
+
+fn set_affinity(cpus: &[usize]) -> Result<(), String> {
+    // SAFETY: sysconf has no preconditions.
+    let online = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) }.max(1) as usize;
+    // SAFETY: an all-zero cpu_set_t is a valid empty set.
+    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+    let mut any = false;
+    for &c in cpus {
+        if c < online && c < libc::CPU_SETSIZE as usize {
+            // SAFETY: `c` is below CPU_SETSIZE.
+            unsafe { libc::CPU_SET(c, &mut set) };
+            any = true;
+        }
+    }
+    if !any {
+        return Err(format!("none of CPUs {cpus:?} is online ({online} online)"));
+    }
+    // SAFETY: `set` is a valid cpu_set_t of the size passed.
+    let r = unsafe { libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(format!("sched_setaffinity: {}", errno()))
+    }
+}

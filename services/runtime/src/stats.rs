@@ -1,0 +1,179 @@
+//! Counters that cost nothing per cycle: a latency histogram created up front
+//! (hdrhistogram, 1 ns .. 60 s, 3 significant digits, never resized), and process CPU
+//! time and resident memory read at the status rate without allocating.
+
+use hdrhistogram::Histogram;
+use microrobot_messages::LatencySummary;
+
+/// A fixed-range latency histogram in ns. Recording never allocates.
+#[derive(Debug, Clone)]
+pub struct LatencyHistogram {
+    hist: Histogram<u64>,
+}
+
+impl Default for LatencyHistogram {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl LatencyHistogram {
+    /// 1 ns .. 60 s at 3 significant digits (values outside are clamped).
+    pub fn new() -> Self {
+        let mut hist = match Histogram::new_with_bounds(1, 60_000_000_000, 3) {
+            Ok(h) => h,
+            Err(_) => Histogram::new(3).unwrap_or_else(|_| unreachable_hist()),
+        };
+        hist.auto(false);
+        Self { hist }
+    }
+
+    /// Records one value (ns), clamped into the histogram's range.
+    #[inline]
+    pub fn record(&mut self, ns: u64) {
+        self.hist.saturating_record(ns.max(1));
+    }
+
+    /// Number of values recorded.
+    pub fn len(&self) -> u64 {
+        self.hist.len()
+    }
+
+    /// True when nothing was recorded.
+    pub fn is_empty(&self) -> bool {
+        self.hist.is_empty()
+    }
+
+    /// Percentiles for the status message (zeros when empty).
+    pub fn summary(&self) -> LatencySummary {
+        if self.hist.is_empty() {
+            return LatencySummary::default();
+        }
+        LatencySummary {
+            count: self.hist.len(),
+            p50_ns: self.hist.value_at_quantile(0.50),
+            p99_ns: self.hist.value_at_quantile(0.99),
+            p999_ns: self.hist.value_at_quantile(0.999),
+            p9999_ns: self.hist.value_at_quantile(0.9999),
+            max_ns: self.hist.max(),
+        }
+    }
+}
+
+#[cold]
+fn unreachable_hist() -> Histogram<u64> {
+    // Histogram::new(3) only fails for sigfig > 5.
+    Histogram::new(2).unwrap_or_else(|_| std::process::abort())
+}
+
+/// Process CPU time (ms, user + system) from `getrusage`.
+pub fn cpu_time_ms() -> u32 {
+    // SAFETY: an all-zero rusage is valid; getrusage fills it.
+    let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `ru` is a valid, writable rusage.
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut ru) } != 0 {
+        return 0;
+    }
+    let ms = |t: libc::timeval| t.tv_sec as u64 * 1000 + t.tv_usec as u64 / 1000;
+    (ms(ru.ru_utime) + ms(ru.ru_stime)).min(u32::MAX as u64) as u32
+}
+
+/// Reads the resident set size from `/proc/self/statm` through a kept-open fd into a
+/// stack buffer (no allocation per read).
+#[derive(Debug)]
+pub struct RssReader {
+    fd: i32,
+    page_kib: u64,
+}
+
+impl RssReader {
+    /// Opens `/proc/self/statm` (reads return 0 when that fails).
+    pub fn new() -> Self {
+        // SAFETY: NUL-terminated path literal.
+        let fd = unsafe {
+            libc::open(
+                c"/proc/self/statm".as_ptr(),
+                libc::O_RDONLY | libc::O_CLOEXEC,
+            )
+        };
+        // SAFETY: sysconf has no preconditions.
+        let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) }.max(4096) as u64;
+        Self {
+            fd,
+            page_kib: page / 1024,
+        }
+    }
+
+    /// Current RSS in KiB (0 when unavailable).
+    pub fn rss_kib(&self) -> u64 {
+        if self.fd < 0 {
+            return 0;
+        }
+        let mut buf = [0u8; 128];
+        // SAFETY: reading into a stack buffer of the given length.
+        let n = unsafe { libc::pread(self.fd, buf.as_mut_ptr().cast(), buf.len(), 0) };
+        if n <= 0 {
+            return 0;
+        }
+        parse_statm_resident(&buf[..n as usize]) * self.page_kib
+    }
+}
+
+impl Default for RssReader {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Drop for RssReader {
+    fn drop(&mut self) {
+        if self.fd >= 0 {
+            // SAFETY: we own this fd.
+            unsafe { libc::close(self.fd) };
+        }
+    }
+}
+
+/// Second field of statm ("size resident shared ..."), in pages.
+fn parse_statm_resident(b: &[u8]) -> u64 {
+    let mut field = 0;
+    let mut val = 0u64;
+    for &c in b {
+        if c == b' ' {
+            if field == 1 {
+                return val;
+            }
+            field += 1;
+            val = 0;
+        } else if c.is_ascii_digit() {
+            val = val * 10 + (c - b'0') as u64;
+        }
+    }
+    if field == 1 { val } else { 0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_summary_has_ordered_percentiles() {
+        let mut h = LatencyHistogram::new();
+        for v in 1..=10_000u64 {
+            h.record(v * 1000);
+        }
+        let s = h.summary();
+        assert_eq!(s.count, 10_000);
+        assert!(s.p50_ns <= s.p99_ns && s.p99_ns <= s.p999_ns && s.p999_ns <= s.max_ns);
+        assert!((s.p50_ns as f64 - 5.0e6).abs() < 1.0e4);
+        h.record(u64::MAX);
+        assert!(h.summary().max_ns >= 60_000_000_000 / 2);
+    }
+
+    #[test]
+    fn statm_parse_and_live_rss() {
+        assert_eq!(parse_statm_resident(b"1000 250 30 1 0 2 0\n"), 250);
+        assert!(RssReader::new().rss_kib() > 0);
+        let _ = cpu_time_ms();
+    }
+}

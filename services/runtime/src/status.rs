@@ -1,0 +1,88 @@
+//! The ~10 Hz status/heartbeat publisher every service owns: fills identity, stamp,
+//! CPU time and RSS, and publishes on the Status service (plus its event).
+
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::*;
+use microrobot_messages::{
+    LifecycleState, ServiceKind, ServiceRole, ServiceStatus, monotonic_ns, open_event,
+    open_publish_subscribe,
+};
+
+use crate::stats::{RssReader, cpu_time_ms};
+
+/// Publishes [`ServiceStatus`] at the configured period.
+pub struct StatusPort {
+    publisher: Publisher<ipc::Service, ServiceStatus, ()>,
+    notifier: Notifier<ipc::Service>,
+    rss: RssReader,
+    period_ns: u64,
+    next_due_ns: u64,
+    seq: u64,
+    role: ServiceRole,
+    pid: u32,
+}
+
+impl StatusPort {
+    /// Opens the Status service of `instance` for `role`.
+    pub fn open(
+        node: &Node<ipc::Service>,
+        instance: &str,
+        role: ServiceRole,
+        period_ms: f64,
+    ) -> anyhow::Result<Self> {
+        let svc = open_publish_subscribe::<ServiceStatus>(node, instance, ServiceKind::Status)?;
+        let publisher = svc
+            .publisher_builder()
+            .create()
+            .map_err(|e| anyhow::anyhow!("status publisher: {e:?}"))?;
+        let ev = open_event(node, instance, ServiceKind::Status)?;
+        let notifier = ev
+            .notifier_builder()
+            .create()
+            .map_err(|e| anyhow::anyhow!("status notifier: {e:?}"))?;
+        Ok(Self {
+            publisher,
+            notifier,
+            rss: RssReader::new(),
+            period_ns: (period_ms * 1e6) as u64,
+            next_due_ns: 0,
+            seq: 0,
+            role,
+            pid: std::process::id(),
+        })
+    }
+
+    /// Whether a periodic status is due at `now_ns`.
+    #[inline]
+    pub fn due(&self, now_ns: u64) -> bool {
+        now_ns >= self.next_due_ns
+    }
+
+    /// Period in ns.
+    pub fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    /// Fills the common fields of `st` and publishes it; schedules the next one.
+    /// Errors are swallowed (status is best effort) and counted by the caller via the result.
+    pub fn publish(&mut self, now_ns: u64, st: &mut ServiceStatus) -> bool {
+        self.seq += 1;
+        st.seq = self.seq;
+        st.stamp_ns = now_ns;
+        st.role = self.role as u32;
+        st.pid = self.pid;
+        st.cpu_time_ms = cpu_time_ms();
+        st.rss_kib = self.rss.rss_kib();
+        self.next_due_ns = now_ns + self.period_ns;
+        let ok = self.publisher.send_copy(*st).is_ok();
+        let _ = self.notifier.notify();
+        ok
+    }
+
+    /// Publishes the final status (lifecycle Finalized).
+    pub fn publish_final(&mut self, st: &mut ServiceStatus) {
+        st.lifecycle = LifecycleState::Finalized as u32;
+        self.publish(monotonic_ns(), st);
+    }
+}

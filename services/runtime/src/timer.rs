@@ -1,0 +1,285 @@
+//! Absolute monotonic deadlines from a `timerfd` (CLOCK_MONOTONIC, TFD_TIMER_ABSTIME,
+//! periodic), attachable to an iceoryx2 WaitSet. The kernel keeps the grid
+//! `start + n·period`, so the clock never drifts; a read returns how many grid points
+//! passed, which is how overruns are seen. Never `WaitSet::attach_interval`: its 1 ms
+//! resolution stretches a 1 kHz period to ~1.09 ms (`notes/iceoryx2-0.10.md`, pitfall 4).
+
+use iceoryx2::prelude::{FileDescriptor, FileDescriptorBased, SynchronousMultiplexing};
+use microrobot_messages::monotonic_ns;
+
+use crate::config::OverrunPolicy;
+
+/// A non-blocking CLOCK_MONOTONIC timerfd.
+#[derive(Debug)]
+pub struct TimerFd {
+    fd: FileDescriptor,
+}
+
+impl FileDescriptorBased for TimerFd {
+    fn file_descriptor(&self) -> &FileDescriptor {
+        &self.fd
+    }
+}
+
+impl SynchronousMultiplexing for TimerFd {}
+
+fn ts(ns: u64) -> libc::timespec {
+    libc::timespec {
+        tv_sec: (ns / 1_000_000_000) as libc::time_t,
+        tv_nsec: (ns % 1_000_000_000) as libc::c_long,
+    }
+}
+
+impl TimerFd {
+    /// Creates an unarmed timer.
+    pub fn new() -> std::io::Result<Self> {
+        // SAFETY: plain syscall.
+        let raw = unsafe {
+            libc::timerfd_create(
+                libc::CLOCK_MONOTONIC,
+                libc::TFD_NONBLOCK | libc::TFD_CLOEXEC,
+            )
+        };
+        if raw < 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        let fd =
+            FileDescriptor::new(raw).ok_or_else(|| std::io::Error::other("invalid timerfd"))?;
+        Ok(Self { fd })
+    }
+
+    /// Arms the timer to fire at absolute `first_ns` and every `period_ns` after it
+    /// (`period_ns` 0: once).
+    pub fn arm_absolute(&self, first_ns: u64, period_ns: u64) -> std::io::Result<()> {
+        let spec = libc::itimerspec {
+            it_interval: ts(period_ns),
+            it_value: ts(first_ns.max(1)),
+        };
+        // SAFETY: `spec` is valid; the old value pointer may be null.
+        let r = unsafe {
+            libc::timerfd_settime(
+                self.fd.native_handle(),
+                libc::TFD_TIMER_ABSTIME,
+                &spec,
+                std::ptr::null_mut(),
+            )
+        };
+        if r != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        Ok(())
+    }
+
+    /// Reads and clears the expiration count (0 when the timer has not fired).
+    pub fn read_expirations(&self) -> u64 {
+        let mut buf = [0u8; 8];
+        // SAFETY: reading 8 bytes into an 8-byte buffer.
+        let n = unsafe { libc::read(self.fd.native_handle(), buf.as_mut_ptr().cast(), buf.len()) };
+        if n == 8 { u64::from_ne_bytes(buf) } else { 0 }
+    }
+}
+
+/// The fixed-rate tick grid of a periodic [`TimerFd`], with the overrun policy and its
+/// counters. Pure bookkeeping: [`Ticker::on_expirations`] is fed what the timer read returned.
+#[derive(Debug, Clone)]
+pub struct Ticker {
+    start_ns: u64,
+    period_ns: u64,
+    policy: OverrunPolicy,
+    /// Grid index of the last tick handed out.
+    next_index: u64,
+    /// Grid points that have expired so far.
+    expired: u64,
+    /// Ticks that started more than one period late (or never started, with Skip).
+    pub deadline_misses: u64,
+    /// Ticks dropped by the Skip policy.
+    pub skipped_ticks: u64,
+}
+
+/// One tick to run: its grid index and ideal time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Tick {
+    /// Grid index (0 = the first tick at `start_ns`).
+    pub index: u64,
+    /// Ideal time of this tick (CLOCK_MONOTONIC ns).
+    pub ideal_ns: u64,
+}
+
+impl Ticker {
+    /// A grid starting at `start_ns` with `period_ns`.
+    pub fn new(start_ns: u64, period_ns: u64, policy: OverrunPolicy) -> Self {
+        Self {
+            start_ns,
+            period_ns: period_ns.max(1),
+            policy,
+            next_index: 0,
+            expired: 0,
+            deadline_misses: 0,
+            skipped_ticks: 0,
+        }
+    }
+
+    /// Period of the grid (ns).
+    pub fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    /// Records `n` new expirations. Afterwards call [`Ticker::next_tick`] until it
+    /// returns `None`.
+    pub fn on_expirations(&mut self, n: u64) {
+        if n == 0 {
+            return;
+        }
+        self.expired += n;
+        let pending = self.expired - self.next_index;
+        if pending > 1 {
+            self.deadline_misses += pending - 1;
+            if self.policy == OverrunPolicy::Skip {
+                self.skipped_ticks += pending - 1;
+                self.next_index = self.expired - 1;
+            }
+        }
+    }
+
+    /// The next tick to run, `None` when caught up.
+    pub fn next_tick(&mut self) -> Option<Tick> {
+        if self.next_index >= self.expired {
+            return None;
+        }
+        let index = self.next_index;
+        self.next_index += 1;
+        Some(Tick {
+            index,
+            ideal_ns: self.start_ns + index * self.period_ns,
+        })
+    }
+}
+
+/// A periodic timer plus its [`Ticker`]: the planner's clock, and the bare timer loop of
+/// the floor probe.
+#[derive(Debug)]
+pub struct PeriodicClock {
+    pub timer: TimerFd,
+    pub ticker: Ticker,
+}
+
+impl PeriodicClock {
+    /// Starts a grid one period from now.
+    pub fn start(period_ns: u64, policy: OverrunPolicy) -> std::io::Result<Self> {
+        let timer = TimerFd::new()?;
+        let start = monotonic_ns() + period_ns;
+        timer.arm_absolute(start, period_ns)?;
+        Ok(Self {
+            timer,
+            ticker: Ticker::new(start, period_ns, policy),
+        })
+    }
+
+    /// Reads the timer and updates the grid (call when the timer's fd fired).
+    pub fn poll(&mut self) {
+        let n = self.timer.read_expirations();
+        self.ticker.on_expirations(n);
+    }
+}
+
+/// Result of the bare timer-loop probe ([`floor_probe`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FloorReport {
+    /// Ticks run.
+    pub ticks: u64,
+    /// Wake-up lateness (actual − ideal) percentiles.
+    pub lateness: microrobot_messages::LatencySummary,
+    /// Ticks that started more than one period late.
+    pub deadline_misses: u64,
+}
+
+/// The machine's timer floor: a bare timerfd loop at `period_ns` for `duration_ns`, with
+/// the same settings as the pipeline (apply [`crate::rt::apply`] first in the same
+/// thread). Lateness and misses are defined exactly as for the planner, so the planner's
+/// figures compare against it.
+pub fn floor_probe(period_ns: u64, duration_ns: u64) -> std::io::Result<FloorReport> {
+    let mut hist = crate::stats::LatencyHistogram::new();
+    let mut clock = PeriodicClock::start(period_ns, OverrunPolicy::Skip)?;
+    let end = monotonic_ns() + duration_ns;
+    let mut ticks = 0;
+    // SAFETY: the fd stays owned by `clock` for the whole loop.
+    let fd = unsafe { clock.timer.fd.native_handle() };
+    loop {
+        let mut pfd = libc::pollfd {
+            fd,
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd.
+        unsafe { libc::poll(&mut pfd, 1, 1000) };
+        let now = monotonic_ns();
+        clock.poll();
+        while let Some(t) = clock.ticker.next_tick() {
+            hist.record(now.saturating_sub(t.ideal_ns));
+            ticks += 1;
+        }
+        if now >= end {
+            break;
+        }
+    }
+    Ok(FloorReport {
+        ticks,
+        lateness: hist.summary(),
+        deadline_misses: clock.ticker.deadline_misses,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn skip_policy_drops_missed_ticks_and_counts_them() {
+        let mut t = Ticker::new(1000, 10, OverrunPolicy::Skip);
+        t.on_expirations(1);
+        assert_eq!(
+            t.next_tick(),
+            Some(Tick {
+                index: 0,
+                ideal_ns: 1000
+            })
+        );
+        assert_eq!(t.next_tick(), None);
+        t.on_expirations(4);
+        assert_eq!(
+            t.next_tick(),
+            Some(Tick {
+                index: 4,
+                ideal_ns: 1040
+            })
+        );
+        assert_eq!(t.next_tick(), None);
+        assert_eq!(t.deadline_misses, 3);
+        assert_eq!(t.skipped_ticks, 3);
+    }
+
+    #[test]
+    fn catch_up_policy_runs_every_tick_back_to_back() {
+        let mut t = Ticker::new(0, 10, OverrunPolicy::CatchUp);
+        t.on_expirations(3);
+        let idx: Vec<u64> = std::iter::from_fn(|| t.next_tick())
+            .map(|k| k.index)
+            .collect();
+        assert_eq!(idx, vec![0, 1, 2]);
+        assert_eq!(t.deadline_misses, 2);
+        assert_eq!(t.skipped_ticks, 0);
+    }
+
+    #[test]
+    fn timerfd_fires_on_the_absolute_grid() {
+        let period = 1_000_000;
+        let mut c = PeriodicClock::start(period, OverrunPolicy::Skip).unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(5));
+        c.poll();
+        let mut n = 0;
+        while c.ticker.next_tick().is_some() {
+            n += 1;
+        }
+        assert!(n >= 1);
+    }
+}

@@ -1,0 +1,224 @@
+//! Validation of bus payloads at every stage: finite values, the robot's joint count,
+//! increasing sequence numbers per publisher, fresh timestamps, joint limits. A refused
+//! message is counted and dropped; the stage holds its last good output.
+
+use microrobot_messages::{JointSetpoint, JointState, MAX_JOINTS, TorqueCommand, all_finite};
+
+/// Why an input message was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Refusal {
+    /// NaN or infinity in an active joint.
+    NonFinite,
+    /// `dof` differs from the robot's joint count.
+    WrongDof,
+    /// Sequence number not above the last one of the same publisher (duplicate or reordered).
+    OutOfOrder,
+    /// Timestamp older than `stale_ms`, or in the future.
+    Stale,
+    /// Outside the joint limits.
+    OutOfLimits,
+}
+
+/// Per-stream sequence tracking: refuses duplicates and reordering, counts gaps as lost
+/// messages, and starts over when the publisher changes (a restarted process).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SeqTracker {
+    publisher: Option<u128>,
+    last: Option<u64>,
+    /// Messages missing between accepted ones (gaps).
+    pub lost: u64,
+    /// Times the publisher changed (restarts seen).
+    pub publisher_changes: u64,
+}
+
+impl SeqTracker {
+    /// Checks `seq` from `publisher` (iceoryx2's unique publisher id); on success it
+    /// becomes the last accepted one.
+    #[inline]
+    pub fn accept(&mut self, publisher: u128, seq: u64) -> Result<(), Refusal> {
+        if self.publisher != Some(publisher) {
+            if self.publisher.is_some() {
+                self.publisher_changes += 1;
+            }
+            self.publisher = Some(publisher);
+            self.last = Some(seq);
+            return Ok(());
+        }
+        match self.last {
+            Some(l) if seq <= l => Err(Refusal::OutOfOrder),
+            Some(l) => {
+                self.lost += seq - l - 1;
+                self.last = Some(seq);
+                Ok(())
+            }
+            None => {
+                self.last = Some(seq);
+                Ok(())
+            }
+        }
+    }
+
+    /// Last accepted sequence number.
+    pub fn last(&self) -> Option<u64> {
+        self.last
+    }
+}
+
+/// A stamp is fresh when it is at most `stale_ns` old and not more than 1 ms in the future.
+#[inline]
+pub fn check_fresh(stamp_ns: u64, now_ns: u64, stale_ns: u64) -> Result<(), Refusal> {
+    if stamp_ns > now_ns.saturating_add(1_000_000) || now_ns.saturating_sub(stamp_ns) > stale_ns {
+        Err(Refusal::Stale)
+    } else {
+        Ok(())
+    }
+}
+
+fn dof_ok(msg_dof: u32, dof: usize) -> Result<(), Refusal> {
+    if msg_dof as usize != dof || dof > MAX_JOINTS {
+        Err(Refusal::WrongDof)
+    } else {
+        Ok(())
+    }
+}
+
+fn finite(arrays: &[&[f64; MAX_JOINTS]], dof: u32) -> Result<(), Refusal> {
+    if arrays.iter().all(|a| all_finite(a, dof)) {
+        Ok(())
+    } else {
+        Err(Refusal::NonFinite)
+    }
+}
+
+/// Joint bounds a setpoint must respect (SI), with a small tolerance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointBounds {
+    pub q_min: [f64; MAX_JOINTS],
+    pub q_max: [f64; MAX_JOINTS],
+    pub qd_max: [f64; MAX_JOINTS],
+}
+
+impl JointBounds {
+    /// Tolerance on positions (rad or m) and, relative, on velocities.
+    pub const TOL_Q: f64 = 1e-6;
+    pub const TOL_QD_REL: f64 = 0.05;
+
+    /// Whether the first `dof` joints of `q`, `qd` are within bounds.
+    pub fn contains(&self, q: &[f64; MAX_JOINTS], qd: &[f64; MAX_JOINTS], dof: usize) -> bool {
+        (0..dof.min(MAX_JOINTS)).all(|i| {
+            q[i] >= self.q_min[i] - Self::TOL_Q
+                && q[i] <= self.q_max[i] + Self::TOL_Q
+                && qd[i].abs() <= self.qd_max[i] * (1.0 + Self::TOL_QD_REL) + Self::TOL_Q
+        })
+    }
+}
+
+/// Checks a setpoint's shape, values and limits (not its sequence or age).
+pub fn check_setpoint(m: &JointSetpoint, dof: usize, bounds: &JointBounds) -> Result<(), Refusal> {
+    dof_ok(m.dof, dof)?;
+    finite(&[&m.q, &m.qd, &m.qdd, &m.jerk], m.dof)?;
+    if !bounds.contains(&m.q, &m.qd, dof) {
+        return Err(Refusal::OutOfLimits);
+    }
+    Ok(())
+}
+
+/// Checks a torque command's shape and values (the actuator saturates, it does not refuse, large torques).
+pub fn check_torque(m: &TorqueCommand, dof: usize) -> Result<(), Refusal> {
+    dof_ok(m.dof, dof)?;
+    finite(&[&m.tau, &m.q_desired], m.dof)
+}
+
+/// Checks a measured state's shape and values.
+pub fn check_state(m: &JointState, dof: usize) -> Result<(), Refusal> {
+    dof_ok(m.dof, dof)?;
+    finite(&[&m.q, &m.qd, &m.tau_applied], m.dof)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sequence_gaps_are_lost_and_duplicates_refused() {
+        let mut t = SeqTracker::default();
+        assert_eq!(t.accept(7, 1), Ok(()));
+        assert_eq!(t.accept(7, 2), Ok(()));
+        assert_eq!(t.accept(7, 5), Ok(()));
+        assert_eq!(t.lost, 2);
+        assert_eq!(t.accept(7, 5), Err(Refusal::OutOfOrder));
+        assert_eq!(t.accept(7, 3), Err(Refusal::OutOfOrder));
+        assert_eq!(t.last(), Some(5));
+    }
+
+    #[test]
+    fn a_new_publisher_starts_a_new_sequence() {
+        let mut t = SeqTracker::default();
+        t.accept(1, 100).unwrap();
+        assert_eq!(t.accept(2, 0), Ok(()));
+        assert_eq!(t.publisher_changes, 1);
+        assert_eq!(t.accept(2, 1), Ok(()));
+        assert_eq!(t.lost, 0);
+    }
+
+    #[test]
+    fn stale_and_future_stamps_are_refused() {
+        let ms = 1_000_000;
+        assert_eq!(check_fresh(100 * ms, 149 * ms, 50 * ms), Ok(()));
+        assert_eq!(
+            check_fresh(100 * ms, 151 * ms, 50 * ms),
+            Err(Refusal::Stale)
+        );
+        assert_eq!(
+            check_fresh(200 * ms, 100 * ms, 50 * ms),
+            Err(Refusal::Stale)
+        );
+    }
+
+    fn bounds() -> JointBounds {
+        JointBounds {
+            q_min: [-1.0; MAX_JOINTS],
+            q_max: [1.0; MAX_JOINTS],
+            qd_max: [2.0; MAX_JOINTS],
+        }
+    }
+
+    #[test]
+    fn setpoints_with_nan_wrong_dof_or_out_of_limits_are_refused() {
+        let mut m = JointSetpoint {
+            dof: 6,
+            ..Default::default()
+        };
+        assert_eq!(check_setpoint(&m, 6, &bounds()), Ok(()));
+        assert_eq!(check_setpoint(&m, 5, &bounds()), Err(Refusal::WrongDof));
+        m.qdd[5] = f64::NAN;
+        assert_eq!(check_setpoint(&m, 6, &bounds()), Err(Refusal::NonFinite));
+        m.qdd[5] = 0.0;
+        m.jerk[7] = f64::NAN; // inactive joint: ignored
+        assert_eq!(check_setpoint(&m, 6, &bounds()), Ok(()));
+        m.q[0] = 1.1;
+        assert_eq!(check_setpoint(&m, 6, &bounds()), Err(Refusal::OutOfLimits));
+        m.q[0] = 0.0;
+        m.qd[2] = -2.2;
+        assert_eq!(check_setpoint(&m, 6, &bounds()), Err(Refusal::OutOfLimits));
+    }
+
+    #[test]
+    fn torque_and_state_with_infinity_are_refused() {
+        let mut t = TorqueCommand {
+            dof: 3,
+            ..Default::default()
+        };
+        assert_eq!(check_torque(&t, 3), Ok(()));
+        t.tau[1] = f64::INFINITY;
+        assert_eq!(check_torque(&t, 3), Err(Refusal::NonFinite));
+        let mut s = JointState {
+            dof: 9,
+            ..Default::default()
+        };
+        assert_eq!(check_state(&s, 9), Err(Refusal::WrongDof));
+        s.dof = 2;
+        s.qd[0] = f64::NAN;
+        assert_eq!(check_state(&s, 2), Err(Refusal::NonFinite));
+    }
+}
