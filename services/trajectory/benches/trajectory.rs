@@ -22,12 +22,13 @@ fn table4_limits() -> KinematicLimits {
 }
 
 fn table4_request() -> MotionRequest {
-    let qi = [-180f64, -90.0, -90.0, -180.0, -90.0, -180.0];
+    let qi = [-180f64, -90.0, 0.0, -180.0, -90.0, -180.0];
+    let qf = [180f64, 90.0, 180.0, 180.0, 90.0, 180.0];
     let mut start = JointVector::zeros();
     let mut target = JointVector::zeros();
     for i in 0..6 {
         start[i] = qi[i].to_radians();
-        target[i] = -qi[i].to_radians();
+        target[i] = qf[i].to_radians();
     }
     MotionRequest {
         dof: 6,
@@ -63,6 +64,8 @@ fn random_from_state(n: usize) -> Vec<MotionRequest> {
             let s = a0 * a0.abs() / (2.0 * j);
             let (lo, hi) = ((-v).max(-v - s), v.min(v - s));
             req.start.q[i] = (2.0 * rng.next() - 1.0) * 2.5;
+            req.limits.position_min[i] = -10.0;
+            req.limits.position_max[i] = 10.0;
             req.start.qd[i] = lo + rng.next() * (hi - lo);
             req.start.qdd[i] = a0;
             req.target.q[i] = (2.0 * rng.next() - 1.0) * 2.5;
