@@ -1,6 +1,9 @@
 //! Criterion benchmarks: planning 6 joints (rest to rest, from a moving state) and
 //! sampling 6 joints. Run: `cargo bench -p microrobot-trajectory --bench trajectory`.
 
+// Joint loops index several per-joint vectors in step.
+#![allow(clippy::needless_range_loop)]
+
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};

@@ -13,6 +13,9 @@
 //!
 //! Units are SI (rad, s) throughout. No I/O, no allocation after planning.
 
+// Joint loops index several per-joint vectors in step; an index reads clearest.
+#![allow(clippy::needless_range_loop)]
+
 mod error;
 pub mod generator;
 pub mod lspb;

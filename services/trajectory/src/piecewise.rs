@@ -74,15 +74,6 @@ impl Kin {
             a: self.a + t * j,
         }
     }
-    /// Mirror image (all signs flipped).
-    #[inline]
-    pub fn neg(self) -> Kin {
-        Kin {
-            p: -self.p,
-            v: -self.v,
-            a: -self.a,
-        }
-    }
 }
 
 /// One joint's motion: pieces of polynomials in local time, each starting where the

@@ -1,6 +1,9 @@
 //! Motion programs: parsing (units, unknown keys), planning with continuity, the
 //! seed's Table 4 program, Cartesian targets through the solver trait.
 
+// Joint loops index several per-joint vectors in step.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 use common::*;
 use microrobot_trajectory::program::{

@@ -1,6 +1,9 @@
 //! Property tests over random problems: exact endpoints, continuity, limits,
 //! time-optimal structure of soft motion, braking, synchronisation.
 
+// Joint loops index several per-joint vectors in step.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 use common::*;
 use microrobot_trajectory::soft::stretch::Stretch;
@@ -60,6 +63,9 @@ fn check_walk(
     }
     Ok(())
 }
+
+/// Limits [v, a, j], start [q, v, a], target q.
+type Problem = ([f64; 3], [f64; 3], f64);
 
 prop_compose! {
     /// Limits and a start state that is inside them and will not cross vmax.
@@ -177,7 +183,7 @@ proptest! {
     #[test]
     fn soft_synchronised_joints_finish_together(ps in prop::collection::vec(joint_problem(), 1..=8)) {
         let dof = ps.len();
-        let col = |f: &dyn Fn(&([f64; 3], [f64; 3], f64)) -> f64| ps.iter().map(f).collect::<Vec<_>>();
+        let col = |f: &dyn Fn(&Problem) -> f64| ps.iter().map(f).collect::<Vec<_>>();
         let lim = limits(&col(&|p| p.0[0]), &col(&|p| p.0[1]), &col(&|p| p.0[2]), 1e3);
         let req = soft_request(&col(&|p| p.1[0]), &col(&|p| p.1[1]), &col(&|p| p.1[2]), &col(&|p| p.2), lim);
         let tr = Trajectory::plan(&req).expect("plans");

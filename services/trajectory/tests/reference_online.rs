@@ -1,6 +1,9 @@
 //! Ruckig 0.19.4 online cases: single-joint time-optimal motion from a moving state
 //! (durations and samples) and 6-joint synchronised durations.
 
+// Joint loops index several per-joint vectors in step.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 use common::*;
 use microrobot_trajectory::Trajectory;

@@ -1,6 +1,9 @@
 //! Seed Table 4 against the reference file: time-optimal durations, phases and
 //! samples of soft motion; tf = 5 s cubic and quintic coefficients and samples.
 
+// Joint loops index several per-joint vectors in step.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 use common::*;
 use microrobot_trajectory::polynomial::{cubic_coefficients, quintic_coefficients};
