@@ -6,7 +6,7 @@ use crate::data::ModelData;
 use crate::math::{Pose, sin_cos};
 use crate::robot::Robot;
 use crate::{Jacobian, JointVector};
-use nalgebra::{Isometry3, SMatrix, Vector3};
+use nalgebra::{Isometry3, Matrix3, SMatrix, Vector3};
 
 /// Evaluates `cos θ_i`, `sin θ_i` and `d_i` of every joint for `q` into `data`.
 #[inline]
@@ -26,28 +26,45 @@ pub(crate) fn update_joint_values(robot: &Robot, data: &mut ModelData, q: &Joint
 }
 
 /// Chains the DH transforms from the joint values already in `data`.
+///
+/// The running frame is kept in locals (axes `x`, `y`, `z` and origin `o`) and
+/// only written to `data`: reading the previous frame back from memory would
+/// stall on store-to-load forwarding every joint.
 #[inline]
 pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData) {
+    let base = &data.frames[0];
+    let mut x: Vector3<f64> = base.rotation.column(0).into_owned();
+    let mut y: Vector3<f64> = base.rotation.column(1).into_owned();
+    let mut z: Vector3<f64> = base.rotation.column(2).into_owned();
+    let mut o = base.translation;
     for i in 0..robot.dof {
         let jc = &robot.consts[i];
         let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
-        let prev = data.frames[i];
-        let r = &prev.rotation;
-        // R_prev · Rz(θ): rotate the first two columns.
-        let x = r.column(0) * c + r.column(1) * s;
-        let y = r.column(1) * c - r.column(0) * s;
-        let z = r.column(2);
-        // · Rx(α): rotate the last two columns.
-        let y2 = y * jc.ca + z * jc.sa;
-        let z2 = z * jc.ca - y * jc.sa;
-        let next = &mut data.frames[i + 1];
-        next.rotation.set_column(0, &x);
-        next.rotation.set_column(1, &y2);
-        next.rotation.set_column(2, &z2);
-        // origin: o_prev + R_prev (a cθ, a sθ, d) = o_prev + a·x + d·z
-        next.translation = prev.translation + x * jc.a + z * d;
+        // R_prev · Rz(θ): rotate the first two axes about z.
+        let xr = x * c + y * s;
+        let yr = y * c - x * s;
+        // · Rx(α): rotate the last two axes about the new x.
+        let y2 = yr * jc.ca + z * jc.sa;
+        let z2 = z * jc.ca - yr * jc.sa;
+        // origin: o_prev + R_prev (a cθ, a sθ, d) = o_prev + a·x_new + d·z_prev
+        o += xr * jc.a + z * d;
+        x = xr;
+        y = y2;
+        z = z2;
+        data.frames[i + 1] = Pose {
+            rotation: Matrix3::from_columns(&[x, y, z]),
+            translation: o,
+        };
     }
-    data.tool = data.frames[robot.dof].compose(robot.tool());
+    let last = Pose {
+        rotation: Matrix3::from_columns(&[x, y, z]),
+        translation: o,
+    };
+    data.tool = if robot.tool_is_identity {
+        last
+    } else {
+        last.compose(robot.tool())
+    };
 }
 
 /// Every frame and the tool frame for `q`, left in `data`.

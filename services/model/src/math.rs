@@ -102,12 +102,16 @@ pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
     let k = (x * std::f64::consts::FRAC_2_PI + ROUND_MAGIC) - ROUND_MAGIC;
     let r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_3;
     let (s, c) = sin_cos_kernel(r);
-    match (k as i64) & 3 {
-        0 => (s, c),
-        1 => (c, -s),
-        2 => (-s, -c),
-        _ => (-c, s),
-    }
+    // Quadrant fix-up without branches (random angles would mispredict):
+    // odd quadrants swap sin and cos, then signs follow bits of k and k + 1.
+    let quadrant = k as i64 as u64;
+    let swap = 0u64.wrapping_sub(quadrant & 1);
+    let (sb, cb) = (s.to_bits(), c.to_bits());
+    let a = (sb & !swap) | (cb & swap);
+    let b = (cb & !swap) | (sb & swap);
+    let sin = f64::from_bits(a ^ ((quadrant & 2) << 62));
+    let cos = f64::from_bits(b ^ ((quadrant.wrapping_add(1) & 2) << 62));
+    (sin, cos)
 }
 
 /// sin and cos on `[-π/4, π/4]` (fdlibm `__kernel_sin` / `__kernel_cos` coefficients).

@@ -242,6 +242,7 @@ pub struct Robot {
     tool: Pose,
     payload: Option<LinkInertia>,
     pub(crate) dof: usize,
+    pub(crate) tool_is_identity: bool,
     pub(crate) consts: [JointConst; MAX_JOINTS],
     pub(crate) bodies: [Body; MAX_JOINTS],
 }
@@ -282,6 +283,7 @@ impl Robot {
             }
             bodies[i] = Body::from_link(&link);
         }
+        let tool_is_identity = tool == Pose::IDENTITY;
         Ok(Robot {
             name: name.into(),
             gravity,
@@ -289,6 +291,7 @@ impl Robot {
             tool,
             payload,
             dof,
+            tool_is_identity,
             consts,
             bodies,
         })

@@ -7,6 +7,7 @@ use crate::data::ModelData;
 use crate::kinematics::{update_frames, update_joint_values};
 use crate::robot::Robot;
 use crate::{JointVector, MassMatrix};
+
 use nalgebra::{Matrix3, Vector3};
 
 /// Joint-space mass matrix `M(q)` (the seed's `D_ij`, eq. 20) with rotor inertia
@@ -23,7 +24,8 @@ pub fn mass_matrix(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Mass
 #[inline]
 pub(crate) fn mass_matrix_from_frames(robot: &Robot, data: &mut ModelData) {
     let n = robot.dof;
-    let mut mass = MassMatrix::zeros();
+    let mass = &mut data.mass;
+    mass.fill(0.0);
     let mut m_c = 0.0;
     let mut h_c = Vector3::zeros();
     let mut i_c = Matrix3::zeros();
@@ -53,8 +55,10 @@ pub(crate) fn mass_matrix_from_frames(robot: &Robot, data: &mut ModelData) {
         } else {
             (h_c.cross(&z), z * m_c)
         };
-        data.crba_moment[i] = moment;
-        data.crba_force[i] = force;
+        let moments = &mut data.crba_moment;
+        let forces = &mut data.crba_force;
+        moments[i] = moment;
+        forces[i] = force;
         // M_ij = S_i · F_j for j >= i (motion · force = omega·moment + v·force).
         let (omega, v) = if revolute {
             (z, axis.translation.cross(&z))
@@ -62,11 +66,10 @@ pub(crate) fn mass_matrix_from_frames(robot: &Robot, data: &mut ModelData) {
             (Vector3::zeros(), z)
         };
         for j in i..n {
-            let mij = omega.dot(&data.crba_moment[j]) + v.dot(&data.crba_force[j]);
+            let mij = omega.dot(&moments[j]) + v.dot(&forces[j]);
             mass[(i, j)] = mij;
             mass[(j, i)] = mij;
         }
         mass[(i, i)] += robot.consts[i].rotor;
     }
-    data.mass = mass;
 }
