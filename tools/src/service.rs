@@ -35,7 +35,15 @@ pub struct ServiceArgs {
 pub fn main(args: ServiceArgs) -> ExitCode {
     match args.role {
         Role::Planner => service_main(ServiceRole::Planner, &args.config, microrobot_planner::run),
-        Role::Dynamics => service_main(ServiceRole::Dynamics, &args.config, microrobot_dynamics::run),
-        Role::Actuator => service_main(ServiceRole::Actuator, &args.config, microrobot_actuator::run),
+        Role::Dynamics => service_main(
+            ServiceRole::Dynamics,
+            &args.config,
+            microrobot_dynamics::run,
+        ),
+        Role::Actuator => service_main(
+            ServiceRole::Actuator,
+            &args.config,
+            microrobot_actuator::run,
+        ),
     }
 }

@@ -473,8 +473,12 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 }
             }
         }
-        if fired[1] {
-            let _ = cmd_listener.try_wait(|_| {});
+        // Drained on every wake-up (see the planner: a new sender's sample can become
+        // visible after its notification).
+        {
+            if fired[1] {
+                let _ = cmd_listener.try_wait(|_| {});
+            }
             while let Ok(Some(sample)) = cmd_sub.receive() {
                 if CommandKind::from_wire(sample.kind) == Some(CommandKind::Reset)
                     && core.reset(monotonic_ns())

@@ -98,9 +98,10 @@ impl DynamicsCore {
         }
     }
 
-    /// Sequence gaps seen on the setpoint and state streams.
+    /// Sequence gaps seen on the setpoint stream (and, in lockstep, on the state stream;
+    /// free-running, only the newest state matters and older ones may be overwritten).
     pub fn lost_messages(&self) -> u64 {
-        self.sp_seq.lost + self.st_seq.lost
+        self.sp_seq.lost + if self.lockstep { self.st_seq.lost } else { 0 }
     }
 
     /// Logical time of the last setpoint (its tick).

@@ -605,10 +605,17 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .history_request(1)
         .create()
         .map_err(|e| err("state subscriber")(&e))?;
-    let st_listener = open_event(&node, inst, ServiceKind::State)?
-        .listener_builder()
-        .create()
-        .map_err(|e| err("state listener")(&e))?;
+    // Only lockstep wakes on states; free-running reads the newest state each tick.
+    let st_listener = if cfg.lockstep {
+        Some(
+            open_event(&node, inst, ServiceKind::State)?
+                .listener_builder()
+                .create()
+                .map_err(|e| err("state listener")(&e))?,
+        )
+    } else {
+        None
+    };
     let cmd_sub = open_publish_subscribe::<MotionCommand>(&node, inst, ServiceKind::Command)?
         .subscriber_builder()
         .history_request(0)
@@ -634,7 +641,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             status.publish_final(&mut st);
             return Ok(());
         }
-        let _ = st_listener.try_wait(|_| {});
+        if let Some(l) = &st_listener {
+            let _ = l.try_wait(|_| {});
+        }
         while let Ok(Some(s)) = st_sub.receive() {
             let msg = *s;
             let publisher = s.header().publisher_id().value();
@@ -663,9 +672,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         timer.arm_absolute(monotonic_ns() + p, p)?;
     }
     let ws = waitset()?;
-    let g_state = ws
-        .attach_notification(&st_listener)
-        .map_err(|e| err("waitset")(&e))?;
+    let g_state = match &st_listener {
+        Some(l) => Some(ws.attach_notification(l).map_err(|e| err("waitset")(&e))?),
+        None => None,
+    };
     let g_cmd = ws
         .attach_notification(&cmd_listener)
         .map_err(|e| err("waitset")(&e))?;
@@ -723,7 +733,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     while !shutdown.is_requested() {
         let mut fired = [false; 4];
         ws.wait_and_process_once(|id| {
-            fired[0] |= id.has_event_from(&g_state);
+            fired[0] |= g_state.as_ref().is_some_and(|g| id.has_event_from(g));
             fired[1] |= id.has_event_from(&g_cmd);
             fired[2] |= id.has_event_from(&g_timer);
             fired[3] |= id.has_event_from(&g_stop);
@@ -733,8 +743,12 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         if fired[3] || shutdown.is_requested() {
             break;
         }
-        if fired[1] {
-            let _ = cmd_listener.try_wait(|_| {});
+        // Commands are drained on every wake-up, not only on their event: a sample can
+        // become visible after its notification when the sender's connection is new.
+        {
+            if fired[1] {
+                let _ = cmd_listener.try_wait(|_| {});
+            }
             while let Ok(Some(s)) = cmd_sub.receive() {
                 let c = *s;
                 drop(s);
@@ -750,7 +764,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         }
         // States: in lockstep each one is a tick; otherwise keep the newest.
         if fired[0] || !cfg.lockstep {
-            let _ = st_listener.try_wait(|_| {});
+            if let Some(l) = &st_listener {
+                let _ = l.try_wait(|_| {});
+            }
             while let Ok(Some(s)) = st_sub.receive() {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();

@@ -56,7 +56,7 @@ pub struct BadConfig(pub String);
 /// `service`. Returns the process exit code ([`exit_code`]).
 pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -> ExitCode {
     init_tracing();
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Warn);
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let shutdown = match Shutdown::new() {
         Ok(s) => s,
         Err(e) => {
