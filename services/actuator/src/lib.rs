@@ -18,6 +18,7 @@ pub mod safety;
 pub mod sim;
 
 use anyhow::Context as _;
+use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use microrobot_messages::{
     CommandKind, Header, JointSetpoint, JointState, LifecycleState, MAX_JOINTS, MotionCommand,
@@ -489,6 +490,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         }
         if fired[2] {
             ticker.on_expirations(timer.read_expirations());
+            // Hands the last state (history 1) to subscribers that joined since the last
+            // send: in lockstep nothing is sent until the first torque, and the planner
+            // starts from that state.
+            let _ = state_pub.update_connections();
             let mut n = 0;
             while ticker.next_tick().is_some() {
                 let now = monotonic_ns();
@@ -509,11 +514,11 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         }
         let now = monotonic_ns();
         if status.due(now) {
-            fill(&mut st, &core, &e2e, ticker.deadline_misses);
+            fill(&mut st, &core, &e2e, 0);
             status.publish(now, &mut st);
         }
     }
-    fill(&mut st, &core, &e2e, ticker.deadline_misses);
+    fill(&mut st, &core, &e2e, 0);
     status.publish_final(&mut st);
     Ok(())
 }

@@ -2,7 +2,11 @@
 //! and publishes a torque command.
 //!
 //! * Feedback on (default), computed torque on the measured state (q, q̇):
-//!   `τ = M(q)(q̈d + Kp(qd − q) + Kd(q̇d − q̇)) + h(q, q̇)` with Kp in 1/s², Kd in 1/s.
+//!   `τ = M(q)(q̈d + Kp(qd − q̂) + Kd(q̇d − q̂̇)) + h(q, q̇)` with Kp in 1/s², Kd in 1/s,
+//!   where (q̂, q̂̇) is the measured state predicted one period ahead under q̈d
+//!   (`delay_compensation`, default on; off: q̂ = q). The measured state is the result
+//!   of the previous torque, one period older than the setpoint; without the
+//!   prediction the loop tracks about q̇·period behind.
 //! * Feedback off, or measured state stale: feed-forward Newton-Euler
 //!   `τ = rnea(qd, q̇d, q̈d)`, flagged `STATE_STALE` when feedback was wanted.
 //! * Every τ is clamped to the joint's effort limit and flagged `CLAMPED`.
@@ -45,6 +49,8 @@ pub struct DynamicsCore {
     data: ModelData,
     dof: usize,
     feedback: bool,
+    predict: bool,
+    period_s: f64,
     kp: f64,
     kd: f64,
     lockstep: bool,
@@ -82,6 +88,8 @@ impl DynamicsCore {
             dof: robot.dof(),
             robot: robot.clone(),
             feedback: cfg.dynamics.feedback,
+            predict: cfg.dynamics.delay_compensation,
+            period_s: 1.0 / cfg.rate_hz,
             kp: cfg.dynamics.kp_per_s2,
             kd: cfg.dynamics.kd_per_s,
             lockstep: cfg.lockstep,
@@ -107,6 +115,11 @@ impl DynamicsCore {
     /// Logical time of the last setpoint (its tick).
     pub fn last_tick(&self) -> Option<u64> {
         self.last_tick_value
+    }
+
+    /// Logical time (tick) of the newest accepted measured state.
+    pub fn state_tick(&self) -> Option<u64> {
+        self.state.map(|s| s.header.tick)
     }
 
     /// Validates a measured state and keeps it as the newest.
@@ -175,8 +188,14 @@ impl DynamicsCore {
                 let q = JointVector::from_column_slice(&s.q);
                 let v = JointVector::from_column_slice(&s.qd);
                 let mut a = JointVector::zeros();
+                // The state is one period older than the setpoint (it is the result of the
+                // previous torque); with delay compensation it is first predicted to the
+                // setpoint's time under the desired acceleration.
+                let h = if self.predict { self.period_s } else { 0.0 };
                 for i in 0..n {
-                    a[i] = ad[i] + self.kp * (qd_[i] - q[i]) + self.kd * (vd[i] - v[i]);
+                    let qp = q[i] + v[i] * h + 0.5 * ad[i] * h * h;
+                    let vp = v[i] + ad[i] * h;
+                    a[i] = ad[i] + self.kp * (qd_[i] - qp) + self.kd * (vd[i] - vp);
                 }
                 let m = mass_matrix(&self.robot, &mut self.data, &q);
                 let h = nonlinear_effects(&self.robot, &mut self.data, &q, &v);
@@ -331,6 +350,25 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
+                if cfg.lockstep {
+                    // Setpoint k needs measured state k−1. Its delivery to this subscriber
+                    // can trail the planner's (the actuator may be preempted between
+                    // subscribers on a shared CPU): wait for it, yielding, up to stale_ms.
+                    let give_up = monotonic_ns() + (cfg.watchdog.stale_ms * 1e6) as u64;
+                    while core.state_tick().is_none_or(|t| t + 1 < msg.header.tick)
+                        && monotonic_ns() < give_up
+                    {
+                        match st_sub.receive() {
+                            Ok(Some(s)) => {
+                                let m = *s;
+                                let p = s.header().publisher_id().value();
+                                drop(s);
+                                let _ = core.accept_state(&m, p);
+                            }
+                            _ => std::thread::yield_now(),
+                        }
+                    }
+                }
                 let now = monotonic_ns();
                 last_setpoint_ns = now;
                 if let Ok(mut cmd) = core.compute(&msg, publisher, now) {

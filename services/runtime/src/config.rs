@@ -110,6 +110,9 @@ pub struct PlannerConfig {
 pub struct DynamicsConfig {
     /// Computed-torque feedback on the measured state (false: feed-forward RNEA only).
     pub feedback: bool,
+    /// Predict the measured state one period ahead before the feedback (it is one period
+    /// older than the setpoint).
+    pub delay_compensation: bool,
     /// Position gain Kp (1/s²).
     pub kp_per_s2: f64,
     /// Velocity gain Kd (1/s).
@@ -239,6 +242,7 @@ impl Default for PipelineConfig {
             },
             dynamics: DynamicsConfig {
                 feedback: true,
+                delay_compensation: true,
                 kp_per_s2: 2500.0,
                 kd_per_s: 100.0,
             },
@@ -357,6 +361,7 @@ impl PipelineConfig {
         let d = &self.dynamics;
         let _ = writeln!(s, "\n[dynamics]");
         let _ = writeln!(s, "feedback = {}", d.feedback);
+        let _ = writeln!(s, "delay_compensation = {}", d.delay_compensation);
         let _ = writeln!(s, "kp_per_s2 = {}", f(d.kp_per_s2));
         let _ = writeln!(s, "kd_per_s = {}", f(d.kd_per_s));
         let a = &self.actuator;
@@ -757,10 +762,11 @@ impl Reader<'_> {
             )?,
         };
 
-        let t = self.tab(root, "", "dynamics", &["feedback", "kp_per_s2", "kd_per_s"])?;
+        let t = self.tab(root, "", "dynamics", &["feedback", "delay_compensation", "kp_per_s2", "kd_per_s"])?;
         let dd = &d.dynamics;
         let dynamics = DynamicsConfig {
             feedback: self.bool(&t, "feedback", dd.feedback)?,
+            delay_compensation: self.bool(&t, "delay_compensation", dd.delay_compensation)?,
             kp_per_s2: self.f64_in(&t, "kp_per_s2", dd.kp_per_s2, 0.0, 1.0e7, false)?,
             kd_per_s: self.f64_in(&t, "kd_per_s", dd.kd_per_s, 0.0, 1.0e5, false)?,
         };
