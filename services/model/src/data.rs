@@ -24,9 +24,6 @@ pub struct ModelData {
     /// RNEA: body forces and moments (frame `i`, about its origin).
     pub(crate) force: [Vector3<f64>; MAX_JOINTS],
     pub(crate) moment: [Vector3<f64>; MAX_JOINTS],
-    /// CRBA: spatial force columns `I_c S` (moment about the base origin, force).
-    pub(crate) crba_moment: [Vector3<f64>; MAX_JOINTS],
-    pub(crate) crba_force: [Vector3<f64>; MAX_JOINTS],
     /// Last mass matrix and its Cholesky factor (lower triangle).
     pub(crate) mass: MassMatrix,
     pub(crate) chol: MassMatrix,
@@ -43,15 +40,13 @@ impl ModelData {
             tool: Pose::IDENTITY,
             force: [Vector3::zeros(); MAX_JOINTS],
             moment: [Vector3::zeros(); MAX_JOINTS],
-            crba_moment: [Vector3::zeros(); MAX_JOINTS],
-            crba_force: [Vector3::zeros(); MAX_JOINTS],
             mass: MassMatrix::zeros(),
             chol: MassMatrix::zeros(),
         }
     }
 
     /// Pose of DH frame `i` in the base frame after the last kinematics call
-    /// ([`crate::forward_kinematics`], [`crate::jacobian`], [`crate::mass_matrix`]):
+    /// ([`crate::forward_kinematics`], [`crate::jacobian`], [`crate::tool_pose`]):
     /// `frame(0)` is the base, `frame(dof)` the last DH frame. Indices beyond
     /// [`MAX_JOINTS`] give the identity.
     pub fn frame(&self, i: usize) -> Pose {

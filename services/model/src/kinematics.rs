@@ -4,7 +4,7 @@
 
 use crate::data::ModelData;
 use crate::math::{Pose, sin_cos};
-use crate::robot::Robot;
+use crate::robot::{Robot, Twist};
 use crate::{Jacobian, JointVector};
 use nalgebra::{Isometry3, Matrix3, SMatrix, Vector3};
 
@@ -44,8 +44,12 @@ pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData) {
         let xr = x * c + y * s;
         let yr = y * c - x * s;
         // · Rx(α): rotate the last two axes about the new x.
-        let y2 = yr * jc.ca + z * jc.sa;
-        let z2 = z * jc.ca - yr * jc.sa;
+        let (y2, z2) = match jc.twist {
+            Twist::Zero => (yr, z),
+            Twist::PlusQuarter => (z, -yr),
+            Twist::MinusQuarter => (-z, yr),
+            Twist::General => (yr * jc.ca + z * jc.sa, z * jc.ca - yr * jc.sa),
+        };
         // origin: o_prev + R_prev (a cθ, a sθ, d) = o_prev + a·x_new + d·z_prev
         o += xr * jc.a + z * d;
         x = xr;

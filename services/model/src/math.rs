@@ -2,6 +2,7 @@
 //! elementary rotations of a DH step, and [`Pose`], a rigid transform kept as a
 //! rotation matrix plus a translation (no quaternion round trips on the hot path).
 
+use crate::robot::{JointConst, Twist};
 use nalgebra::{
     Isometry3, Matrix3, Matrix4, Point3, Rotation3, Translation3, UnitQuaternion, Vector3,
 };
@@ -138,19 +139,29 @@ fn sin_cos_kernel(r: f64) -> (f64, f64) {
     (s, c)
 }
 
-/// `Rᵀ v` for the DH rotation `R = Rz(θ) Rx(α)` given `(cos θ, sin θ)` and `(cos α, sin α)`.
+/// `Rᵀ v` for the DH rotation of joint `jc` (`R = Rz(θ) Rx(α)`, `(cos θ, sin θ)` given),
+/// with the twist's signed permutation when `α` is 0 or ±90°.
 #[inline(always)]
-pub(crate) fn dh_rot_t(c: f64, s: f64, ca: f64, sa: f64, v: &Vector3<f64>) -> Vector3<f64> {
+pub(crate) fn joint_rot_t(jc: &JointConst, c: f64, s: f64, v: &Vector3<f64>) -> Vector3<f64> {
     let ux = c * v.x + s * v.y;
     let uy = -s * v.x + c * v.y;
-    Vector3::new(ux, ca * uy + sa * v.z, -sa * uy + ca * v.z)
+    match jc.twist {
+        Twist::Zero => Vector3::new(ux, uy, v.z),
+        Twist::PlusQuarter => Vector3::new(ux, v.z, -uy),
+        Twist::MinusQuarter => Vector3::new(ux, -v.z, uy),
+        Twist::General => Vector3::new(ux, jc.ca * uy + jc.sa * v.z, -jc.sa * uy + jc.ca * v.z),
+    }
 }
 
-/// `R v` for the DH rotation `R = Rz(θ) Rx(α)`.
+/// `R v` for the DH rotation of joint `jc` (see [`joint_rot_t`]).
 #[inline(always)]
-pub(crate) fn dh_rot(c: f64, s: f64, ca: f64, sa: f64, v: &Vector3<f64>) -> Vector3<f64> {
-    let uy = ca * v.y - sa * v.z;
-    let uz = sa * v.y + ca * v.z;
+pub(crate) fn joint_rot(jc: &JointConst, c: f64, s: f64, v: &Vector3<f64>) -> Vector3<f64> {
+    let (uy, uz) = match jc.twist {
+        Twist::Zero => (v.y, v.z),
+        Twist::PlusQuarter => (-v.z, v.y),
+        Twist::MinusQuarter => (v.z, -v.y),
+        Twist::General => (jc.ca * v.y - jc.sa * v.z, jc.sa * v.y + jc.ca * v.z),
+    };
     Vector3::new(c * v.x - s * uy, s * v.x + c * uy, uz)
 }
 
@@ -191,22 +202,36 @@ mod tests {
     }
 
     #[test]
-    fn dh_rotation_helpers_match_the_matrix_of_seed_eq_1() {
-        let (th, al) = (0.7_f64, -1.2_f64);
-        let r = Matrix3::new(
-            th.cos(),
-            -th.sin() * al.cos(),
-            th.sin() * al.sin(),
-            th.sin(),
-            th.cos() * al.cos(),
-            -th.cos() * al.sin(),
+    fn joint_rotations_match_the_matrix_of_seed_eq_1_for_every_twist_class() {
+        let th = 0.7_f64;
+        for al in [
             0.0,
-            al.sin(),
-            al.cos(),
-        );
-        let v = Vector3::new(0.3, -1.1, 2.5);
-        let (c, s, ca, sa) = (th.cos(), th.sin(), al.cos(), al.sin());
-        assert!((dh_rot(c, s, ca, sa, &v) - r * v).norm() < 1e-15);
-        assert!((dh_rot_t(c, s, ca, sa, &v) - r.transpose() * v).norm() < 1e-15);
+            std::f64::consts::FRAC_PI_2,
+            -std::f64::consts::FRAC_PI_2,
+            -1.2,
+        ] {
+            let r = Matrix3::new(
+                th.cos(),
+                -th.sin() * al.cos(),
+                th.sin() * al.sin(),
+                th.sin(),
+                th.cos() * al.cos(),
+                -th.cos() * al.sin(),
+                0.0,
+                al.sin(),
+                al.cos(),
+            );
+            let jc = JointConst::with_twist(al);
+            let v = Vector3::new(0.3, -1.1, 2.5);
+            let (c, s) = (th.cos(), th.sin());
+            assert!(
+                (joint_rot(&jc, c, s, &v) - r * v).norm() < 1e-15,
+                "alpha {al}"
+            );
+            assert!(
+                (joint_rot_t(&jc, c, s, &v) - r.transpose() * v).norm() < 1e-15,
+                "alpha {al}"
+            );
+        }
     }
 }

@@ -183,6 +183,61 @@ pub enum RobotError {
     },
 }
 
+/// DH twist `alpha` classified: exactly 0 or ±90° (to 1e-12 rad, where the
+/// rotation `Rx(alpha)` is a signed permutation), or anything else.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) enum Twist {
+    #[default]
+    Zero,
+    PlusQuarter,
+    MinusQuarter,
+    General,
+}
+
+impl JointConst {
+    /// Constants of a joint with twist `alpha` and nothing else (for tests).
+    #[cfg(test)]
+    pub fn with_twist(alpha: f64) -> JointConst {
+        let twist = Twist::of(alpha);
+        JointConst {
+            ca: twist.cos(alpha),
+            sa: twist.sin(alpha),
+            twist,
+            ..JointConst::default()
+        }
+    }
+}
+
+impl Twist {
+    fn of(alpha: f64) -> Twist {
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        if alpha.abs() < 1e-12 {
+            Twist::Zero
+        } else if (alpha - half_pi).abs() < 1e-12 {
+            Twist::PlusQuarter
+        } else if (alpha + half_pi).abs() < 1e-12 {
+            Twist::MinusQuarter
+        } else {
+            Twist::General
+        }
+    }
+    fn cos(self, alpha: f64) -> f64 {
+        match self {
+            Twist::Zero => 1.0,
+            Twist::PlusQuarter | Twist::MinusQuarter => 0.0,
+            Twist::General => alpha.cos(),
+        }
+    }
+    fn sin(self, alpha: f64) -> f64 {
+        match self {
+            Twist::Zero => 0.0,
+            Twist::PlusQuarter => 1.0,
+            Twist::MinusQuarter => -1.0,
+            Twist::General => alpha.sin(),
+        }
+    }
+}
+
 /// Per-joint constants in the form the algorithms read (SI).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct JointConst {
@@ -192,6 +247,8 @@ pub(crate) struct JointConst {
     pub a: f64,
     pub ca: f64,
     pub sa: f64,
+    /// Twist class, so the common 0 and ±90° twists skip multiplications.
+    pub twist: Twist,
     pub rotor: f64,
     pub viscous: f64,
     pub coulomb: f64,
@@ -266,13 +323,15 @@ impl Robot {
         let mut consts = [JointConst::default(); MAX_JOINTS];
         let mut bodies = [Body::default(); MAX_JOINTS];
         for (i, j) in joints.iter().enumerate() {
+            let twist = Twist::of(j.dh.alpha);
             consts[i] = JointConst {
                 revolute: j.kind == JointKind::Revolute,
                 theta0: j.dh.theta,
                 d0: j.dh.d,
                 a: j.dh.a,
-                ca: j.dh.alpha.cos(),
-                sa: j.dh.alpha.sin(),
+                ca: twist.cos(j.dh.alpha),
+                sa: twist.sin(j.dh.alpha),
+                twist,
                 rotor: j.rotor_inertia,
                 viscous: j.viscous_friction,
                 coulomb: j.coulomb_friction,

@@ -2,11 +2,11 @@
 //! `M` from CRBA, `h` from RNEA, and an in-place Cholesky factorisation of the
 //! `dof × dof` block (no allocation).
 
-use super::crba::mass_matrix_from_frames;
+use super::crba::mass_matrix_from_joint_values;
 use super::rnea::{RneaTerms, rnea_from_joint_values};
 use crate::JointVector;
 use crate::data::ModelData;
-use crate::kinematics::{update_frames, update_joint_values};
+use crate::kinematics::update_joint_values;
 use crate::robot::Robot;
 
 /// Why forward dynamics has no unique answer.
@@ -56,8 +56,7 @@ pub fn try_forward_dynamics(
 ) -> Result<JointVector, DynamicsError> {
     let n = robot.dof;
     update_joint_values(robot, data, q);
-    update_frames(robot, data);
-    mass_matrix_from_frames(robot, data);
+    mass_matrix_from_joint_values(robot, data);
     let h = rnea_from_joint_values(
         robot,
         data,

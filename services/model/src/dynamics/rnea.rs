@@ -4,7 +4,7 @@
 use crate::JointVector;
 use crate::data::ModelData;
 use crate::kinematics::update_joint_values;
-use crate::math::{dh_rot, dh_rot_t};
+use crate::math::{joint_rot, joint_rot_t};
 use crate::robot::{Robot, friction};
 use nalgebra::Vector3;
 
@@ -129,14 +129,14 @@ pub(crate) fn rnea_from_joint_values(
         if jc.revolute {
             let wp = Vector3::new(w.x, w.y, w.z + dq);
             let wdp = Vector3::new(wd.x + w.y * dq, wd.y - w.x * dq, wd.z + ddq);
-            w = dh_rot_t(c, s, jc.ca, jc.sa, &wp);
-            wd = dh_rot_t(c, s, jc.ca, jc.sa, &wdp);
-            acc = dh_rot_t(c, s, jc.ca, jc.sa, &acc) + wd.cross(&pstar) + w.cross(&w.cross(&pstar));
+            w = joint_rot_t(jc, c, s, &wp);
+            wd = joint_rot_t(jc, c, s, &wdp);
+            acc = joint_rot_t(jc, c, s, &acc) + wd.cross(&pstar) + w.cross(&w.cross(&pstar));
         } else {
             let z = Vector3::new(0.0, jc.sa, jc.ca);
-            w = dh_rot_t(c, s, jc.ca, jc.sa, &w);
-            wd = dh_rot_t(c, s, jc.ca, jc.sa, &wd);
-            acc = dh_rot_t(c, s, jc.ca, jc.sa, &acc)
+            w = joint_rot_t(jc, c, s, &w);
+            wd = joint_rot_t(jc, c, s, &wd);
+            acc = joint_rot_t(jc, c, s, &acc)
                 + z * ddq
                 + wd.cross(&pstar)
                 + w.cross(&z) * (2.0 * dq)
@@ -166,8 +166,8 @@ pub(crate) fn rnea_from_joint_values(
             extra += friction(jc.viscous, jc.coulomb, qd[i]);
         }
         tau[i] = t + extra;
-        f_child = dh_rot(c, s, jc.ca, jc.sa, &f);
-        n_child = dh_rot(c, s, jc.ca, jc.sa, &m);
+        f_child = joint_rot(jc, c, s, &f);
+        n_child = joint_rot(jc, c, s, &m);
     }
     tau
 }
