@@ -24,7 +24,7 @@ fn table4_limits() -> KinematicLimits {
     l
 }
 
-fn table4_request() -> MotionRequest {
+pub fn table4_request() -> MotionRequest {
     let qi = [-180f64, -90.0, 0.0, -180.0, -90.0, -180.0];
     let qf = [180f64, 90.0, 180.0, 180.0, 90.0, 180.0];
     let mut start = JointVector::zeros();
@@ -55,7 +55,7 @@ impl Lcg {
 }
 
 /// Random 6-joint problems from moving states inside the limits (no brake needed).
-fn random_from_state(n: usize) -> Vec<MotionRequest> {
+pub fn random_from_state(n: usize) -> Vec<MotionRequest> {
     let mut rng = Lcg(30303);
     let lim = table4_limits();
     let mut out = Vec::new();

@@ -55,8 +55,8 @@ pub(crate) fn piecewise(q0: f64, q1: f64, t: f64, v: f64) -> Piecewise {
     let a = v / tb;
     let mut pw = Piecewise::polynomial(tb, [q0, 0.0, 0.5 * a, 0.0, 0.0, 0.0], fin);
     let qb = q0 + 0.5 * a * tb * tb;
-    pw.push_piece(t - 2.0 * tb, [qb, v, 0.0, 0.0, 0.0, 0.0], fin);
+    pw.push_piece(t - 2.0 * tb, [qb, v, 0.0, 0.0], fin);
     let qc = q1 - 0.5 * a * tb * tb;
-    pw.push_piece(tb, [qc, v, -0.5 * a, 0.0, 0.0, 0.0], fin);
+    pw.push_piece(tb, [qc, v, -0.5 * a, 0.0], fin);
     pw
 }

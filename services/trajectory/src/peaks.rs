@@ -78,8 +78,8 @@ pub(crate) fn extremes(pw: &Piecewise) -> [f64; 5] {
     let mut out = [fin.p, fin.p, fin.v.abs(), fin.a.abs(), 0.0];
     for (t0, t1, c) in pw.pieces() {
         let len = t1 - t0;
-        let (qlo, qhi) = range(c, len);
-        let dv = deriv(c);
+        let (qlo, qhi) = range(&c, len);
+        let dv = deriv(&c);
         let (vlo, vhi) = range(&dv, len);
         let da = deriv(&dv);
         let (alo, ahi) = range(&da, len);

@@ -77,63 +77,73 @@ impl Kin {
 }
 
 /// One joint's motion: pieces of polynomials in local time, each starting where the
-/// previous ends. After the last piece the joint holds its final state.
+/// previous ends. After the last piece the joint holds its final state. Pieces are
+/// cubic (c0..c3); a quintic is a single piece whose c4, c5 live in `c45`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Piecewise {
     n: usize,
-    /// Any piece of degree > 3 (quintic); otherwise sampling skips c4, c5.
-    quintic: bool,
-    /// End time of each piece (cumulative from 0).
+    /// c4, c5 of the first piece (quintic); zero otherwise.
+    c45: [f64; 2],
+    /// End time of each piece (cumulative from 0); +∞ past the last piece, so the
+    /// piece index is a branch-free count.
     end: [f64; MAX_PHASES],
-    /// Coefficients c0..c5 of q(τ) = Σ cᵢ τⁱ, τ = local time in the piece.
-    c: [[f64; 6]; MAX_PHASES],
+    /// Coefficients c0..c3 of q(τ) = Σ cᵢ τⁱ, τ = local time in the piece.
+    c: [[f64; 4]; MAX_PHASES],
     /// Final (q, qd, qdd), returned at and after the end.
     fin: Kin,
 }
 
 impl Piecewise {
     /// A joint that holds still at `p`.
-    pub fn hold(p: f64) -> Self {
+    pub const fn hold(p: f64) -> Self {
         Self {
             n: 0,
-            quintic: false,
-            end: [0.0; MAX_PHASES],
-            c: [[0.0; 6]; MAX_PHASES],
+            c45: [0.0; 2],
+            end: [f64::INFINITY; MAX_PHASES],
+            c: [[0.0; 4]; MAX_PHASES],
             fin: Kin { p, v: 0.0, a: 0.0 },
         }
     }
 
     /// Constant-jerk phases from `start`; `fin` overrides the integrated final state
-    /// (to land exactly on the target despite round-off), `sign` mirrors everything.
+    /// (to land exactly on the target despite round-off).
     pub fn from_phases(start: Kin, phases: &Phases, fin: Option<Kin>) -> Self {
         let mut out = Self::hold(start.p);
-        let mut s = start;
-        let mut t = 0.0;
-        for ph in &phases.p[..phases.n] {
-            let i = out.n;
-            t += ph.t;
-            out.end[i] = t;
-            out.c[i] = [s.p, s.v, 0.5 * s.a, ph.j / 6.0, 0.0, 0.0];
-            out.n += 1;
-            s = s.advance(ph.t, ph.j);
-        }
-        out.fin = fin.unwrap_or(s);
+        out.set_phases(start, phases, fin);
         out
     }
 
-    /// A single polynomial piece of length `t` ending in `fin`.
+    /// In-place [`Piecewise::from_phases`] (no copy of the whole table).
+    pub fn set_phases(&mut self, start: Kin, phases: &Phases, fin: Option<Kin>) {
+        let mut s = start;
+        let mut t = 0.0;
+        self.n = 0;
+        self.end = [f64::INFINITY; MAX_PHASES];
+        self.c45 = [0.0; 2];
+        for ph in &phases.p[..phases.n] {
+            let i = self.n;
+            t += ph.t;
+            self.end[i] = t;
+            self.c[i] = [s.p, s.v, 0.5 * s.a, ph.j / 6.0];
+            self.n += 1;
+            s = s.advance(ph.t, ph.j);
+        }
+        self.fin = fin.unwrap_or(s);
+    }
+
+    /// A single polynomial piece (degree ≤ 5) of length `t` ending in `fin`.
     pub fn polynomial(t: f64, c: [f64; 6], fin: Kin) -> Self {
         let mut out = Self::hold(fin.p);
         out.n = 1;
-        out.quintic = c[4] != 0.0 || c[5] != 0.0;
+        out.c45 = [c[4], c[5]];
         out.end[0] = t;
-        out.c[0] = c;
+        out.c[0] = [c[0], c[1], c[2], c[3]];
         out.fin = fin;
         out
     }
 
-    /// Appends a polynomial piece of length `t` (used by LSPB).
-    pub fn push_piece(&mut self, t: f64, c: [f64; 6], fin: Kin) {
+    /// Appends a cubic piece of length `t` (used by LSPB).
+    pub fn push_piece(&mut self, t: f64, c: [f64; 4], fin: Kin) {
         if self.n < MAX_PHASES && t > 0.0 {
             let t0 = self.duration();
             self.end[self.n] = t0 + t;
@@ -153,17 +163,25 @@ impl Piecewise {
         }
     }
 
+    #[inline]
+    fn coefficients(&self, i: usize) -> [f64; 6] {
+        let c = &self.c[i];
+        let h = if i == 0 { self.c45 } else { [0.0; 2] };
+        [c[0], c[1], c[2], c[3], h[0], h[1]]
+    }
+
     /// Position range [min, max] over the whole motion. Piece ends are the next
-    /// piece's c0; a piece only needs its interior looked at when its velocity
-    /// changes sign inside it.
+    /// piece's c0; a piece only needs its interior looked at (by `interior`) when its
+    /// velocity changes sign inside it.
     pub fn position_range(&self, interior: impl Fn(&[f64; 6], f64) -> (f64, f64)) -> (f64, f64) {
         let (mut lo, mut hi) = (self.fin.p, self.fin.p);
+        let quintic = self.c45 != [0.0; 2];
         for i in 0..self.n {
             let c = &self.c[i];
             lo = lo.min(c[0]);
             hi = hi.max(c[0]);
             let len = self.end[i] - if i == 0 { 0.0 } else { self.end[i - 1] };
-            let monotone = !self.quintic && {
+            let monotone = !quintic && {
                 let v_end = c[1] + len * (2.0 * c[2] + len * 3.0 * c[3]);
                 let mut same = c[1] * v_end > 0.0;
                 if same && c[3] != 0.0 {
@@ -175,7 +193,7 @@ impl Piecewise {
                 same
             };
             if !monotone {
-                let (a, b) = interior(c, len);
+                let (a, b) = interior(&self.coefficients(i), len);
                 lo = lo.min(a);
                 hi = hi.max(b);
             }
@@ -188,11 +206,11 @@ impl Piecewise {
         self.fin
     }
 
-    /// Number of pieces and their (start, end, coefficients) — for peak analysis.
-    pub fn pieces(&self) -> impl Iterator<Item = (f64, f64, &[f64; 6])> + '_ {
+    /// The pieces as (start, end, coefficients c0..c5) — for peak analysis.
+    pub fn pieces(&self) -> impl Iterator<Item = (f64, f64, [f64; 6])> + '_ {
         (0..self.n).map(move |i| {
             let t0 = if i == 0 { 0.0 } else { self.end[i - 1] };
-            (t0, self.end[i], &self.c[i])
+            (t0, self.end[i], self.coefficients(i))
         })
     }
 
@@ -200,25 +218,29 @@ impl Piecewise {
     #[inline]
     pub fn eval(&self, t: f64) -> [f64; 4] {
         let mut i = 0;
-        while i < self.n && t >= self.end[i] {
+        while i < MAX_PHASES && t >= self.end[i] {
             i += 1;
         }
-        if i == self.n {
+        if i >= self.n {
             return [self.fin.p, self.fin.v, self.fin.a, 0.0];
         }
         let t0 = if i == 0 { 0.0 } else { self.end[i - 1] };
         let x = (t - t0).max(0.0);
         let c = &self.c[i];
-        if !self.quintic {
-            let q = c[0] + x * (c[1] + x * (c[2] + x * c[3]));
-            let qd = c[1] + x * (2.0 * c[2] + x * 3.0 * c[3]);
-            let qdd = 2.0 * c[2] + x * 6.0 * c[3];
-            return [q, qd, qdd, 6.0 * c[3]];
+        let q = c[0] + x * (c[1] + x * (c[2] + x * c[3]));
+        let qd = c[1] + x * (2.0 * c[2] + x * 3.0 * c[3]);
+        let qdd = 2.0 * c[2] + x * 6.0 * c[3];
+        let j = 6.0 * c[3];
+        if i != 0 || self.c45 == [0.0; 2] {
+            return [q, qd, qdd, j];
         }
-        let q = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
-        let qd = c[1] + x * (2.0 * c[2] + x * (3.0 * c[3] + x * (4.0 * c[4] + x * 5.0 * c[5])));
-        let qdd = 2.0 * c[2] + x * (6.0 * c[3] + x * (12.0 * c[4] + x * 20.0 * c[5]));
-        let j = 6.0 * c[3] + x * (24.0 * c[4] + x * 60.0 * c[5]);
-        [q, qd, qdd, j]
+        let [c4, c5] = self.c45;
+        let x2 = x * x;
+        [
+            q + x2 * x2 * (c4 + x * c5),
+            qd + x2 * x * (4.0 * c4 + x * 5.0 * c5),
+            qdd + x2 * (12.0 * c4 + x * 20.0 * c5),
+            j + x * (24.0 * c4 + x * 60.0 * c5),
+        ]
     }
 }

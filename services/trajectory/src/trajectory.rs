@@ -60,7 +60,14 @@ impl Trajectory {
             false,
         )?;
         let (s, g) = (&req.start, &req.target);
-        let mut joints = [Piecewise::hold(0.0); MAX_JOINTS];
+        // Built in place: the joint table is the bulk of the value.
+        let mut traj = Trajectory {
+            dof,
+            duration: 0.0,
+            braked: false,
+            joints: [Piecewise::hold(0.0); MAX_JOINTS],
+        };
+        let joints = &mut traj.joints;
         let mut braked = false;
         let duration = match req.profile {
             Profile::Cubic { duration: t } => {
@@ -134,18 +141,14 @@ impl Trajectory {
                 if let Some(t) = min_duration {
                     validate::duration("profile.min_duration", t)?;
                 }
-                let plan = sync::plan_soft(dof, s, &g.q, &req.limits, min_duration);
-                joints = plan.joints;
-                braked = plan.braked;
-                plan.duration
+                let (duration, b) =
+                    sync::plan_soft(dof, s, &g.q, &req.limits, min_duration, joints);
+                braked = b;
+                duration
             }
         };
-        let traj = Trajectory {
-            dof,
-            duration,
-            braked,
-            joints,
-        };
+        traj.duration = duration;
+        traj.braked = braked;
         traj.check_positions(&req.limits)?;
         Ok(traj)
     }
@@ -200,17 +203,27 @@ impl Trajectory {
     /// Allocation-free.
     #[inline]
     pub fn sample(&self, t: f64) -> Sample {
-        let mut out = Sample::default();
-        // From the common end on, every joint reports its exact final state.
-        let t = if t >= self.duration { f64::INFINITY } else { t };
-        for i in 0..self.dof.min(MAX_JOINTS) {
-            let [q, qd, qdd, j] = self.joints[i].eval(t);
-            out.q[i] = q;
-            out.qd[i] = qd;
-            out.qdd[i] = qdd;
-            out.jerk[i] = j;
+        let mut out = [[0.0; MAX_JOINTS]; 4];
+        let n = self.dof.min(MAX_JOINTS);
+        if t >= self.duration {
+            // From the common end on, every joint reports its exact final state.
+            for (i, pw) in self.joints[..n].iter().enumerate() {
+                let f = pw.final_state();
+                out[0][i] = f.p;
+                out[1][i] = f.v;
+                out[2][i] = f.a;
+            }
+        } else {
+            for (i, pw) in self.joints[..n].iter().enumerate() {
+                let [q, qd, qdd, j] = pw.eval(t);
+                out[0][i] = q;
+                out[1][i] = qd;
+                out[2][i] = qdd;
+                out[3][i] = j;
+            }
         }
-        out
+        let [q, qd, qdd, jerk] = out.map(JointVector::from);
+        Sample { q, qd, qdd, jerk }
     }
 
     /// Peak values per joint (computed on demand; not for the hot path).

@@ -10,7 +10,7 @@
 //! family with the VEL/ACC0/ACC1 variants, for rest targets.
 
 use super::velocity::velocity_change;
-use super::{Kin, Limits1, Phases, solve, stop_velocity};
+use super::{Kin, Limits1, Phases, solve_tol, stop_velocity};
 
 /// The push duration after which the stop velocity reaches vmax (positive frame).
 pub fn tau_max(v0: f64, a0: f64, lim: &Limits1) -> f64 {
@@ -100,7 +100,12 @@ fn positive(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
         ph.extend(&stop);
         ph
     } else {
-        let tau = solve(|t| push_then_stop(v0, a0, t, lim).1 - d, 0.0, tmax);
+        let tau = solve_tol(
+            |t| push_then_stop(v0, a0, t, lim).1 - d,
+            0.0,
+            tmax,
+            1e-15 * (1.0 + d.abs()),
+        );
         push_then_stop(v0, a0, tau, lim).0
     }
 }
