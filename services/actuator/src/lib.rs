@@ -413,6 +413,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .attach_notification(shutdown)
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
 
+    let mut phased = false;
     let publish = |s: JointState| {
         let ok = state_pub.send_copy(s).is_ok();
         let _ = state_notifier.notify();
@@ -467,6 +468,22 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let now = monotonic_ns();
                 if core.accept_torque(&msg, publisher, now).is_ok() {
                     e2e.record(now.saturating_sub(msg.header.source_stamp_ns));
+                    if !cfg.lockstep && !phased {
+                        // Free-running: put the plant steps half a period after the
+                        // planner's ticks, so torque k is applied in the step that ends
+                        // before setpoint k+1 (the same one-period loop delay as lockstep).
+                        phased = true;
+                        let p = cfg.period_ns();
+                        let mut first = msg.header.source_stamp_ns + p / 2;
+                        while first <= now {
+                            first += p;
+                        }
+                        if timer.arm_absolute(first, p).is_ok() {
+                            let _ = timer.read_expirations();
+                            ticker =
+                                microrobot_runtime::Ticker::new(first, p, cfg.realtime.overrun);
+                        }
+                    }
                     if !core.steps_on_timer() {
                         core.check_watchdog(now);
                         publish(core.step(monotonic_ns()));

@@ -379,7 +379,7 @@ impl PlannerCore {
         }
         let d = c.duration_s;
         let fixed = profile_kind != ProfileKind::Soft;
-        if d < 0.0 || d > 3600.0 || (fixed && d <= 0.0) {
+        if !(0.0..=3600.0).contains(&d) || (fixed && d <= 0.0) {
             return Err(CommandError::BadDuration(d));
         }
         let mut target = JointVector::zeros();

@@ -18,10 +18,11 @@ fn robot_path() -> PathBuf {
 }
 
 fn lockstep_config() -> PipelineConfig {
-    let mut cfg = PipelineConfig::default();
-    cfg.robot = robot_path();
-    cfg.lockstep = true;
-    cfg
+    PipelineConfig {
+        robot: robot_path(),
+        lockstep: true,
+        ..Default::default()
+    }
 }
 
 fn move_command(target: [f64; 6]) -> MotionCommand {
