@@ -1,9 +1,15 @@
 //! Criterion benchmarks of the hot-path algorithms on the seed arm
 //! (`config/robots/seed-arm.toml`) at random states inside its limits.
 //! Run: `cargo bench -p microrobot-model --bench model`.
+//!
+//! Time is the benchmark thread's own CPU time (Linux
+//! `CLOCK_THREAD_CPUTIME_ID`), so time the shared 2-core machine spends on
+//! other processes is not charged to the model; set `MICROROBOT_BENCH_WALL=1`
+//! for criterion's wall clock instead.
 #![allow(clippy::needless_range_loop)] // index loops read like the matrix formulas
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::measurement::{Measurement, ValueFormatter, WallTime};
+use criterion::{Criterion, Throughput, criterion_main};
 use microrobot_model::{
     JointVector, ModelData, Robot, forward_dynamics, forward_kinematics, jacobian, lagrange_euler,
     mass_matrix, rnea,
@@ -45,7 +51,83 @@ fn states(robot: &Robot) -> Vec<State> {
         .collect()
 }
 
-fn benches(c: &mut Criterion) {
+/// Thread CPU time in nanoseconds (`clock_gettime(CLOCK_THREAD_CPUTIME_ID)`).
+struct ThreadCpuTime;
+
+#[repr(C)]
+struct Timespec {
+    tv_sec: i64,
+    tv_nsec: i64,
+}
+
+unsafe extern "C" {
+    // From the C library that std already links; Linux x86_64/aarch64 layout.
+    fn clock_gettime(clock: i32, tp: *mut Timespec) -> i32;
+}
+
+const CLOCK_THREAD_CPUTIME_ID: i32 = 3;
+
+fn thread_cpu_ns() -> u64 {
+    let mut ts = Timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec for the duration of the call.
+    let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    if rc != 0 {
+        return 0;
+    }
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+struct NanosFormatter;
+
+impl ValueFormatter for NanosFormatter {
+    fn scale_values(&self, typical: f64, values: &mut [f64]) -> &'static str {
+        if typical < 1e3 {
+            "ns"
+        } else {
+            values.iter_mut().for_each(|v| *v /= 1e3);
+            "µs"
+        }
+    }
+    fn scale_throughputs(
+        &self,
+        _typical: f64,
+        _throughput: &Throughput,
+        _values: &mut [f64],
+    ) -> &'static str {
+        "(no throughput)"
+    }
+    fn scale_for_machines(&self, _values: &mut [f64]) -> &'static str {
+        "ns"
+    }
+}
+
+impl Measurement for ThreadCpuTime {
+    type Intermediate = u64;
+    type Value = u64;
+    fn start(&self) -> u64 {
+        thread_cpu_ns()
+    }
+    fn end(&self, start: u64) -> u64 {
+        thread_cpu_ns().saturating_sub(start)
+    }
+    fn add(&self, a: &u64, b: &u64) -> u64 {
+        a + b
+    }
+    fn zero(&self) -> u64 {
+        0
+    }
+    fn to_f64(&self, v: &u64) -> f64 {
+        *v as f64
+    }
+    fn formatter(&self) -> &dyn ValueFormatter {
+        &NanosFormatter
+    }
+}
+
+fn benches<M: Measurement + 'static>(c: &mut Criterion<M>) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml");
     let robot = match Robot::from_file(&path) {
         Ok(r) => r,
@@ -108,5 +190,20 @@ fn benches(c: &mut Criterion) {
     });
 }
 
-criterion_group!(model, benches);
+fn model() {
+    if std::env::var_os("MICROROBOT_BENCH_WALL").is_some() {
+        let mut c = Criterion::default()
+            .with_measurement(WallTime)
+            .configure_from_args();
+        benches(&mut c);
+        c.final_summary();
+    } else {
+        let mut c = Criterion::default()
+            .with_measurement(ThreadCpuTime)
+            .configure_from_args();
+        benches(&mut c);
+        c.final_summary();
+    }
+}
+
 criterion_main!(model);
