@@ -19,6 +19,7 @@
 mod error;
 pub mod generator;
 pub mod lspb;
+pub mod model;
 mod peaks;
 mod piecewise;
 pub mod polynomial;
@@ -34,11 +35,9 @@ pub use generator::{Generator, Status};
 pub use stop::stop_trajectory;
 pub use trajectory::{Peaks, Trajectory, minimum_duration};
 
-/// Largest number of joints a trajectory carries (same capacity as the robot model).
-pub const MAX_JOINTS: usize = 8;
-
-/// One value per joint; only the first `dof` entries are meaningful.
-pub type JointVector = nalgebra::SVector<f64, MAX_JOINTS>;
+/// Largest number of joints a trajectory carries (the robot model's capacity), and
+/// one value per joint (only the first `dof` entries are meaningful).
+pub use microrobot_model::{JointVector, MAX_JOINTS};
 
 /// Kinematic state of all joints (capacity 8, `dof` active).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
