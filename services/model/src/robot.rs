@@ -249,6 +249,9 @@ pub(crate) struct JointConst {
     pub sa: f64,
     /// Twist class, so the common 0 and ±90° twists skip multiplications.
     pub twist: Twist,
+    /// Whether frame `i`'s origin can differ from frame `i-1`'s (false for a
+    /// revolute joint with `a = d = 0`, whose offset terms are skipped).
+    pub offset: bool,
     pub rotor: f64,
     pub viscous: f64,
     pub coulomb: f64,
@@ -266,6 +269,8 @@ pub(crate) struct Body {
     pub h: Vector3<f64>,
     /// Inertia about the frame origin.
     pub inertia_origin: Matrix3<f64>,
+    /// Whether the centre of mass is off the frame origin (`h != 0`).
+    pub has_h: bool,
 }
 
 impl Default for Body {
@@ -285,6 +290,7 @@ impl Body {
             inertia_com: l.inertia,
             h: c * l.mass,
             inertia_origin,
+            has_h: c * l.mass != Vector3::zeros(),
         }
     }
 }
@@ -332,6 +338,7 @@ impl Robot {
                 ca: twist.cos(j.dh.alpha),
                 sa: twist.sin(j.dh.alpha),
                 twist,
+                offset: !(j.kind == JointKind::Revolute && j.dh.a == 0.0 && j.dh.d == 0.0),
                 rotor: j.rotor_inertia,
                 viscous: j.viscous_friction,
                 coulomb: j.coulomb_friction,

@@ -133,21 +133,26 @@ pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData)
         let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
         let hr = joint_rot(jc, c, s, &h);
         let ir = inertia.rotate_x(jc).rotate_z(c, s);
-        // Shift from O_{i+1} to O_i, p = O_{i+1} in frame i:
-        // I_A = I_B + 2(h·p) 1 − (h pᵀ + p hᵀ) + m(|p|² 1 − p pᵀ).
-        let p = Vector3::new(jc.a * c, jc.a * s, d);
-        let hp = hr.dot(&p);
-        let pp = p.norm_squared();
-        let diag = 2.0 * hp + m * pp;
-        inertia = Sym3 {
-            xx: ir.xx + diag - 2.0 * hr.x * p.x - m * p.x * p.x,
-            yy: ir.yy + diag - 2.0 * hr.y * p.y - m * p.y * p.y,
-            zz: ir.zz + diag - 2.0 * hr.z * p.z - m * p.z * p.z,
-            xy: ir.xy - (hr.x * p.y + p.x * hr.y) - m * p.x * p.y,
-            xz: ir.xz - (hr.x * p.z + p.x * hr.z) - m * p.x * p.z,
-            yz: ir.yz - (hr.y * p.z + p.y * hr.z) - m * p.y * p.z,
-        };
-        h = hr + p * m;
+        if !jc.offset {
+            inertia = ir;
+            h = hr;
+        } else {
+            // Shift from O_{i+1} to O_i, p = O_{i+1} in frame i:
+            // I_A = I_B + 2(h·p) 1 − (h pᵀ + p hᵀ) + m(|p|² 1 − p pᵀ).
+            let p = Vector3::new(jc.a * c, jc.a * s, d);
+            let hp = hr.dot(&p);
+            let pp = p.norm_squared();
+            let diag = 2.0 * hp + m * pp;
+            inertia = Sym3 {
+                xx: ir.xx + diag - 2.0 * hr.x * p.x - m * p.x * p.x,
+                yy: ir.yy + diag - 2.0 * hr.y * p.y - m * p.y * p.y,
+                zz: ir.zz + diag - 2.0 * hr.z * p.z - m * p.z * p.z,
+                xy: ir.xy - (hr.x * p.y + p.x * hr.y) - m * p.x * p.y,
+                xz: ir.xz - (hr.x * p.z + p.x * hr.z) - m * p.x * p.z,
+                yz: ir.yz - (hr.y * p.z + p.y * hr.z) - m * p.y * p.z,
+            };
+            h = hr + p * m;
+        }
         // Spatial force of the composite for unit motion of joint i (z axis of
         // frame i): moment about O_i and force.
         let (mut moment, mut force) = if jc.revolute {
@@ -162,7 +167,10 @@ pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData)
             let (ck, sk, dk) = (data.cos[k], data.sin[k], data.d[k]);
             let pk = Vector3::new(jk.a * ck, jk.a * sk, dk);
             force = joint_rot(jk, ck, sk, &force);
-            moment = joint_rot(jk, ck, sk, &moment) + pk.cross(&force);
+            moment = joint_rot(jk, ck, sk, &moment);
+            if jk.offset {
+                moment += pk.cross(&force);
+            }
             let mki = if jk.revolute { moment.z } else { force.z };
             mass[(k, i)] = mki;
             mass[(i, k)] = mki;

@@ -131,7 +131,10 @@ pub(crate) fn rnea_from_joint_values(
             let wdp = Vector3::new(wd.x + w.y * dq, wd.y - w.x * dq, wd.z + ddq);
             w = joint_rot_t(jc, c, s, &wp);
             wd = joint_rot_t(jc, c, s, &wdp);
-            acc = joint_rot_t(jc, c, s, &acc) + wd.cross(&pstar) + w.cross(&w.cross(&pstar));
+            acc = joint_rot_t(jc, c, s, &acc);
+            if jc.offset {
+                acc += wd.cross(&pstar) + w.cross(&w.cross(&pstar));
+            }
         } else {
             let z = Vector3::new(0.0, jc.sa, jc.ca);
             w = joint_rot_t(jc, c, s, &w);
@@ -143,9 +146,14 @@ pub(crate) fn rnea_from_joint_values(
                 + w.cross(&w.cross(&pstar));
         }
         let b = &robot.bodies[i];
-        data.force[i] = acc * b.mass + wd.cross(&b.h) + w.cross(&w.cross(&b.h));
         let iw = b.inertia_origin * w;
-        data.moment[i] = b.inertia_origin * wd + w.cross(&iw) + b.h.cross(&acc);
+        if b.has_h {
+            data.force[i] = acc * b.mass + wd.cross(&b.h) + w.cross(&w.cross(&b.h));
+            data.moment[i] = b.inertia_origin * wd + w.cross(&iw) + b.h.cross(&acc);
+        } else {
+            data.force[i] = acc * b.mass;
+            data.moment[i] = b.inertia_origin * wd + w.cross(&iw);
+        }
     }
     let mut tau = JointVector::zeros();
     let mut f_child = Vector3::zeros();
@@ -155,7 +163,10 @@ pub(crate) fn rnea_from_joint_values(
         let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
         let pstar = Vector3::new(jc.a, d * jc.sa, d * jc.ca);
         let f = data.force[i] + f_child;
-        let m = data.moment[i] + n_child + pstar.cross(&f);
+        let mut m = data.moment[i] + n_child;
+        if jc.offset {
+            m += pstar.cross(&f);
+        }
         let t = if jc.revolute {
             jc.sa * m.y + jc.ca * m.z
         } else {
