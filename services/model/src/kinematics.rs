@@ -3,25 +3,37 @@
 //! smallest singular value, rank.
 
 use crate::data::ModelData;
-use crate::math::{Pose, sin_cos};
+use crate::math::{Pose, sin_cos_pair};
 use crate::robot::{Robot, Twist};
-use crate::{Jacobian, JointVector};
+use crate::{Jacobian, JointVector, MAX_JOINTS};
 use nalgebra::{Isometry3, Matrix3, SMatrix, Vector3};
 
 /// Evaluates `cos θ_i`, `sin θ_i` and `d_i` of every joint for `q` into `data`.
 #[inline]
 pub(crate) fn update_joint_values(robot: &Robot, data: &mut ModelData, q: &JointVector) {
-    for i in 0..robot.dof {
+    let n = robot.dof;
+    let mut theta = [0.0; MAX_JOINTS];
+    for i in 0..n {
         let jc = &robot.consts[i];
-        let (theta, d) = if jc.revolute {
-            (jc.theta0 + q[i], jc.d0)
+        if jc.revolute {
+            theta[i] = jc.theta0 + q[i];
+            data.d[i] = jc.d0;
         } else {
-            (jc.theta0, jc.d0 + q[i])
-        };
-        let (s, c) = sin_cos(theta);
-        data.sin[i] = s;
-        data.cos[i] = c;
-        data.d[i] = d;
+            theta[i] = jc.theta0;
+            data.d[i] = jc.d0 + q[i];
+        }
+    }
+    let mut i = 0;
+    while i < n {
+        // Two angles per SIMD call; a lone last joint pairs with a dummy 0.
+        let [a, b] = sin_cos_pair(theta[i], theta[(i + 1).min(MAX_JOINTS - 1)]);
+        data.sin[i] = a.0;
+        data.cos[i] = a.1;
+        if i + 1 < n {
+            data.sin[i + 1] = b.0;
+            data.cos[i + 1] = b.1;
+        }
+        i += 2;
     }
 }
 

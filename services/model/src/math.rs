@@ -87,6 +87,26 @@ impl Pose {
     }
 }
 
+// Cody-Waite split of π/2 (33-bit pieces: k·PIO2_1 and k·PIO2_2 are exact for
+// |k| < 2^20), the round-to-integer constant 1.5·2^52, and fdlibm's
+// `__kernel_sin` / `__kernel_cos` minimax coefficients.
+const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0;
+const PIO2_1: f64 = 1.5707963267341256;
+const PIO2_2: f64 = 6.077100506303966e-11;
+const PIO2_3: f64 = 2.0222662487111665e-21;
+const S1: f64 = -0.16666666666666632;
+const S2: f64 = 0.00833333333332249;
+const S3: f64 = -0.0001984126982985795;
+const S4: f64 = 2.7557313707070068e-06;
+const S5: f64 = -2.5050760253406863e-08;
+const S6: f64 = 1.58969099521155e-10;
+const C1: f64 = 0.0416666666666666;
+const C2: f64 = -0.001388888888887411;
+const C3: f64 = 2.480158728947673e-05;
+const C4: f64 = -2.7557314351390663e-07;
+const C5: f64 = 2.087572321298175e-09;
+const C6: f64 = -1.1359647557788195e-11;
+
 /// `(sin x, cos x)`, accurate to about one ulp for `|x| < 1e5` (Cody-Waite
 /// reduction by π/2 and fdlibm's minimax kernels), several times faster than two
 /// libm calls. Larger or non-finite arguments fall back to [`f64::sin_cos`].
@@ -95,11 +115,7 @@ pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
     if x.is_nan() || x.abs() >= 1.0e5 {
         return x.sin_cos();
     }
-    const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
     // π/2 split in 33-bit pieces: k · PIO2_1 and k · PIO2_2 are exact for |k| < 2^20.
-    const PIO2_1: f64 = 1.5707963267341256;
-    const PIO2_2: f64 = 6.077100506303966e-11;
-    const PIO2_3: f64 = 2.0222662487111665e-21;
     let k = (x * std::f64::consts::FRAC_2_PI + ROUND_MAGIC) - ROUND_MAGIC;
     let r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_3;
     let (s, c) = sin_cos_kernel(r);
@@ -115,21 +131,107 @@ pub(crate) fn sin_cos(x: f64) -> (f64, f64) {
     (sin, cos)
 }
 
+/// [`sin_cos`] of two angles at once in the two lanes of an SSE2 register (part
+/// of the x86-64 baseline): the same reduction, kernels and quadrant fix-up,
+/// bit for bit, at about half the cost per angle.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn sin_cos_pair(x0: f64, x1: f64) -> [(f64, f64); 2] {
+    use std::arch::x86_64::*;
+    if x0.is_nan() || x1.is_nan() || x0.abs() >= 1.0e5 || x1.abs() >= 1.0e5 {
+        return [sin_cos(x0), sin_cos(x1)];
+    }
+    // SAFETY: SSE2 is part of the x86-64 baseline, so the intrinsics are always
+    // available; the two stores write two f64 into arrays of two f64.
+    unsafe {
+        let splat = _mm_set1_pd;
+        let mul = |a, b| _mm_mul_pd(a, b);
+        let add = |a, b| _mm_add_pd(a, b);
+        let sub = |a, b| _mm_sub_pd(a, b);
+        let x = _mm_set_pd(x1, x0);
+        let magic = splat(ROUND_MAGIC);
+        let t = add(mul(x, splat(std::f64::consts::FRAC_2_PI)), magic);
+        let k = sub(t, magic);
+        let r = sub(
+            sub(sub(x, mul(k, splat(PIO2_1))), mul(k, splat(PIO2_2))),
+            mul(k, splat(PIO2_3)),
+        );
+        let z = mul(r, r);
+        let ps = add(
+            splat(S1),
+            mul(
+                z,
+                add(
+                    splat(S2),
+                    mul(
+                        z,
+                        add(
+                            splat(S3),
+                            mul(z, add(splat(S4), mul(z, add(splat(S5), mul(z, splat(S6)))))),
+                        ),
+                    ),
+                ),
+            ),
+        );
+        let s = add(r, mul(mul(r, z), ps));
+        let pc = mul(
+            mul(z, z),
+            add(
+                splat(C1),
+                mul(
+                    z,
+                    add(
+                        splat(C2),
+                        mul(
+                            z,
+                            add(
+                                splat(C3),
+                                mul(z, add(splat(C4), mul(z, add(splat(C5), mul(z, splat(C6)))))),
+                            ),
+                        ),
+                    ),
+                ),
+            ),
+        );
+        let one = splat(1.0);
+        let hz = mul(splat(0.5), z);
+        let w = sub(one, hz);
+        let c = add(w, add(sub(sub(one, w), hz), pc));
+        // The low mantissa bits of t hold k in two's complement.
+        let quadrant = _mm_castpd_si128(t);
+        let one_i = _mm_set1_epi64x(1);
+        let two_i = _mm_set1_epi64x(2);
+        let swap = _mm_castsi128_pd(_mm_sub_epi64(
+            _mm_setzero_si128(),
+            _mm_and_si128(quadrant, one_i),
+        ));
+        let a = _mm_or_pd(_mm_andnot_pd(swap, s), _mm_and_pd(swap, c));
+        let b = _mm_or_pd(_mm_andnot_pd(swap, c), _mm_and_pd(swap, s));
+        let sign_s = _mm_castsi128_pd(_mm_slli_epi64(_mm_and_si128(quadrant, two_i), 62));
+        let sign_c = _mm_castsi128_pd(_mm_slli_epi64(
+            _mm_and_si128(_mm_add_epi64(quadrant, one_i), two_i),
+            62,
+        ));
+        let sin = _mm_xor_pd(a, sign_s);
+        let cos = _mm_xor_pd(b, sign_c);
+        let mut so = [0.0; 2];
+        let mut co = [0.0; 2];
+        _mm_storeu_pd(so.as_mut_ptr(), sin);
+        _mm_storeu_pd(co.as_mut_ptr(), cos);
+        [(so[0], co[0]), (so[1], co[1])]
+    }
+}
+
+/// [`sin_cos`] of two angles (portable fallback).
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+pub(crate) fn sin_cos_pair(x0: f64, x1: f64) -> [(f64, f64); 2] {
+    [sin_cos(x0), sin_cos(x1)]
+}
+
 /// sin and cos on `[-π/4, π/4]` (fdlibm `__kernel_sin` / `__kernel_cos` coefficients).
 #[inline]
 fn sin_cos_kernel(r: f64) -> (f64, f64) {
-    const S1: f64 = -0.16666666666666632;
-    const S2: f64 = 0.00833333333332249;
-    const S3: f64 = -0.0001984126982985795;
-    const S4: f64 = 2.7557313707070068e-06;
-    const S5: f64 = -2.5050760253406863e-08;
-    const S6: f64 = 1.58969099521155e-10;
-    const C1: f64 = 0.0416666666666666;
-    const C2: f64 = -0.001388888888887411;
-    const C3: f64 = 2.480158728947673e-05;
-    const C4: f64 = -2.7557314351390663e-07;
-    const C5: f64 = 2.087572321298175e-09;
-    const C6: f64 = -1.1359647557788195e-11;
     let z = r * r;
     let s = r + r * z * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6)))));
     let pc = z * z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6)))));
@@ -199,6 +301,21 @@ mod tests {
                 "cos({x}) = {c}, libm {ec}"
             );
         }
+    }
+
+    #[test]
+    fn paired_sin_cos_equals_the_scalar_one_bit_for_bit() {
+        let mut x = -40.0_f64;
+        while x < 40.0 {
+            let y = 0.37 - 1.3 * x;
+            let [a, b] = sin_cos_pair(x, y);
+            assert_eq!(a, sin_cos(x), "x = {x}");
+            assert_eq!(b, sin_cos(y), "y = {y}");
+            x += 0.001_37;
+        }
+        let [a, b] = sin_cos_pair(f64::NAN, 2e6);
+        assert!(a.0.is_nan() && a.1.is_nan());
+        assert_eq!(b, 2e6_f64.sin_cos());
     }
 
     #[test]
