@@ -5,4 +5,5 @@ pub mod eval_trajectory;
 pub mod run;
 pub mod send;
 pub mod service;
+pub mod supervisor;
 pub mod top;

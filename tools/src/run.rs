@@ -1,6 +1,726 @@
-//! `microrobot run` (being written by the supervisor's owner).
-/// Arguments.
-#[derive(Debug, clap::Args)]
-pub struct RunArgs {}
-/// Entry point.
-pub fn main(_args: RunArgs) -> std::process::ExitCode { std::process::ExitCode::FAILURE }
+//! `microrobot run`: starts the planner, dynamics and actuator processes of one pipeline
+//! instance from `config/pipeline.toml`, supervises them, and prints a summary.
+//!
+//! Sequence: load and validate the config (+ command-line overrides) → take the
+//! instance lock and refuse a live instance → clean what a crashed earlier run left →
+//! write the resolved config to the run dir → start actuator, dynamics, planner, each
+//! once the previous one reports ready → show progress → stop at the end of the program,
+//! after `--duration`, or on Ctrl-C (SIGINT to every child, wait for their final
+//! statuses, SIGKILL after the grace period) → restart a service that died if the
+//! config says so → summary (and `--summary-json`).
+
+use std::io::IsTerminal as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use microrobot_messages::{LifecycleState, ServiceRole, ServiceStatus, monotonic_ns};
+use microrobot_model::Robot;
+use microrobot_runtime::config::FailurePolicy;
+use microrobot_runtime::{PipelineConfig, exit_code};
+
+use crate::supervisor::instance::{self, InstanceInUse};
+use crate::supervisor::monitor::{ROLES, StatusMonitor, slot};
+use crate::supervisor::process::{Launch, Service, describe, log_tail};
+use crate::supervisor::summary::{RunFacts, Summary, fold, lifecycle_name};
+
+/// Options of `microrobot run`; each override replaces the config file's key.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RunArgs {
+    /// Pipeline config (every key documented in config/pipeline.README.md).
+    #[arg(long, default_value = "config/pipeline.toml")]
+    pub config: PathBuf,
+    /// Stop after this many seconds (overrides `duration_s`).
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+    /// Control rate in Hz (overrides `rate_hz`).
+    #[arg(long, value_name = "HZ")]
+    pub rate_hz: Option<f64>,
+    /// Lockstep: logical time, one plant step per torque command (overrides `lockstep`).
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Motion program file (overrides `program`).
+    #[arg(long, value_name = "FILE")]
+    pub program: Option<PathBuf>,
+    /// Run without a motion program: hold and take `microrobot send` commands.
+    #[arg(long, conflicts_with = "program")]
+    pub no_program: bool,
+    /// Instance name: the service-name prefix (overrides `instance`).
+    #[arg(long, value_name = "NAME")]
+    pub instance: Option<String>,
+    /// Write the summary as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    pub summary_json: Option<PathBuf>,
+    /// Feed-forward only: computed-torque feedback off (overrides `dynamics.feedback`).
+    #[arg(long)]
+    pub no_feedback: bool,
+    /// Links of the simulated arm heavier by this factor (overrides `actuator.sim.mass_scale`).
+    #[arg(long, value_name = "FACTOR")]
+    pub mass_scale: Option<f64>,
+    /// No progress output, only the summary.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Runs the pipeline; the exit code is one of [`exit_code`].
+pub fn main(args: RunArgs) -> ExitCode {
+    match supervise(&args) {
+        Ok(code) => ExitCode::from(code),
+        Err(Failure { code, error }) => {
+            eprintln!("error: {error:#}");
+            ExitCode::from(code)
+        }
+    }
+}
+
+/// An error with the exit code it maps to.
+struct Failure {
+    code: u8,
+    error: anyhow::Error,
+}
+
+fn fail(code: u8) -> impl FnOnce(anyhow::Error) -> Failure {
+    move |error| Failure { code, error }
+}
+
+/// Why the run is stopping.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stop {
+    ProgramDone,
+    Duration,
+    Interrupted,
+    ServiceFailed,
+    Timeout,
+}
+
+impl Stop {
+    fn name(self) -> &'static str {
+        match self {
+            Stop::ProgramDone => "program_done",
+            Stop::Duration => "duration",
+            Stop::Interrupted => "interrupted",
+            Stop::ServiceFailed => "service_failed",
+            Stop::Timeout => "timeout",
+        }
+    }
+}
+
+/// Loads the config and applies the command-line overrides; every value is validated
+/// again by the config loader, so an override is checked exactly like a file key.
+pub fn resolve_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
+    let mut cfg = PipelineConfig::load(&args.config).map_err(anyhow::Error::new)?;
+    let mut overridden = false;
+    if let Some(d) = args.duration {
+        cfg.duration_s = Some(d);
+        overridden = true;
+    }
+    if let Some(r) = args.rate_hz {
+        cfg.rate_hz = r;
+        overridden = true;
+    }
+    if args.lockstep {
+        cfg.lockstep = true;
+        overridden = true;
+    }
+    if let Some(p) = &args.program {
+        let abs = std::fs::canonicalize(p)
+            .with_context(|| format!("--program {}: cannot open", p.display()))?;
+        cfg.program = Some(abs);
+        overridden = true;
+    }
+    if args.no_program {
+        cfg.program = None;
+        overridden = true;
+    }
+    if let Some(i) = &args.instance {
+        cfg.instance = i.clone();
+        overridden = true;
+    }
+    if args.no_feedback {
+        cfg.dynamics.feedback = false;
+        overridden = true;
+    }
+    if let Some(m) = args.mass_scale {
+        cfg.actuator.sim.mass_scale = m;
+        overridden = true;
+    }
+    if overridden {
+        let origin = format!("{} with command-line overrides", args.config.display());
+        let base = args.config.parent().unwrap_or(Path::new("."));
+        cfg = PipelineConfig::from_toml_str(&cfg.to_toml_string(), &origin, base)
+            .map_err(anyhow::Error::new)?;
+    }
+    Ok(cfg)
+}
+
+/// The per-role process slots and what they accumulated over restarts.
+struct Pipeline {
+    services: [Option<Service>; 3],
+    /// Counters of earlier incarnations (restarts), per role.
+    carried: [Option<ServiceStatus>; 3],
+    restarts: [u32; 3],
+    /// A restarted service that has not reported ready yet: since when.
+    restarting: [Option<Instant>; 3],
+}
+
+impl Pipeline {
+    fn service(&mut self, role: ServiceRole) -> Option<&mut Service> {
+        self.services[slot(role)].as_mut()
+    }
+
+    /// Folds the last status of `role`'s current process into the carried totals.
+    fn carry(&mut self, role: ServiceRole, monitor: &StatusMonitor) {
+        if let Some(st) = monitor.get(role) {
+            let acc = self.carried[slot(role)].get_or_insert_with(ServiceStatus::default);
+            fold(acc, st);
+        }
+    }
+
+    fn stop_all(&mut self, monitor: &mut StatusMonitor, grace: Duration) -> bool {
+        // The planner first, so nothing new enters the pipeline; then the rest.
+        for role in [
+            ServiceRole::Planner,
+            ServiceRole::Dynamics,
+            ServiceRole::Actuator,
+        ] {
+            if let Some(s) = self.service(role) {
+                s.signal(libc::SIGINT);
+            }
+        }
+        let end = Instant::now() + grace;
+        loop {
+            let _ = monitor.poll();
+            let running = self
+                .services
+                .iter_mut()
+                .flatten()
+                .map(|s| usize::from(s.poll_exit().is_none()))
+                .sum::<usize>();
+            if running == 0 {
+                break;
+            }
+            if Instant::now() >= end {
+                for s in self.services.iter_mut().flatten() {
+                    if s.poll_exit().is_none() {
+                        eprintln!(
+                            "warning: {} (pid {}) did not stop within {:.1} s; killing it",
+                            s.launch.role,
+                            s.pid(),
+                            grace.as_secs_f64()
+                        );
+                        s.kill_and_reap();
+                    }
+                }
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        // Final statuses may arrive just before exit.
+        let _ = monitor.poll();
+        self.services
+            .iter_mut()
+            .flatten()
+            .all(|s| s.poll_exit().is_some_and(|e| e.success()))
+    }
+}
+
+fn role_name(role: ServiceRole) -> &'static str {
+    role.name()
+}
+
+/// The launch of `role`: `microrobot service <role> --config <resolved>` or the
+/// configured external actuator command (placeholders `{instance}`, `{config}`,
+/// `{rate_hz}`, `{run_dir}` substituted; the same values are in the environment).
+fn launch_for(
+    role: ServiceRole,
+    cfg: &PipelineConfig,
+    resolved: &Path,
+    run_dir: &Path,
+) -> anyhow::Result<Launch> {
+    let exe = std::env::current_exe().context("cannot find the microrobot executable")?;
+    let env = vec![
+        ("MICROROBOT_INSTANCE".to_string(), cfg.instance.clone()),
+        (
+            "MICROROBOT_CONFIG".to_string(),
+            resolved.display().to_string(),
+        ),
+        ("MICROROBOT_RATE_HZ".to_string(), cfg.rate_hz.to_string()),
+        (
+            "MICROROBOT_LOCKSTEP".to_string(),
+            if cfg.lockstep { "1" } else { "0" }.to_string(),
+        ),
+    ];
+    let argv = match (&cfg.actuator.command, role) {
+        (Some(cmd), ServiceRole::Actuator) => cmd
+            .iter()
+            .map(|a| {
+                a.replace("{instance}", &cfg.instance)
+                    .replace("{config}", &resolved.display().to_string())
+                    .replace("{rate_hz}", &cfg.rate_hz.to_string())
+                    .replace("{run_dir}", &run_dir.display().to_string())
+            })
+            .collect(),
+        _ => vec![
+            exe.display().to_string(),
+            "service".to_string(),
+            role.name().to_string(),
+            "--config".to_string(),
+            resolved.display().to_string(),
+        ],
+    };
+    Ok(Launch {
+        role: role_name(role),
+        argv,
+        env,
+        log: run_dir.join(format!("{}.log", role.name())),
+    })
+}
+
+/// Progress output: an indicatif line on a terminal, plain lines every few seconds otherwise.
+struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+    last_plain: Instant,
+    quiet: bool,
+}
+
+impl Progress {
+    fn new(quiet: bool) -> Self {
+        let bar = (!quiet && std::io::stderr().is_terminal()).then(|| {
+            let bar = indicatif::ProgressBar::new_spinner();
+            bar.enable_steady_tick(Duration::from_millis(200));
+            bar
+        });
+        Self {
+            bar,
+            last_plain: Instant::now(),
+            quiet,
+        }
+    }
+
+    fn note(&self, msg: &str) {
+        if self.quiet {
+            return;
+        }
+        match &self.bar {
+            Some(bar) => bar.println(msg),
+            None => eprintln!("{msg}"),
+        }
+    }
+
+    fn update(&mut self, monitor: &StatusMonitor, start: Instant) {
+        if self.quiet {
+            return;
+        }
+        let line = progress_line(monitor, start);
+        match &self.bar {
+            Some(bar) => bar.set_message(line),
+            None => {
+                if self.last_plain.elapsed() >= Duration::from_secs(3) {
+                    self.last_plain = Instant::now();
+                    eprintln!("{line}");
+                }
+            }
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+fn progress_line(monitor: &StatusMonitor, start: Instant) -> String {
+    let mut s = format!("[{:6.1} s]", start.elapsed().as_secs_f64());
+    if let Some(p) = monitor.get(ServiceRole::Planner) {
+        s.push_str(&format!(" program t={:.2} s", p.motion_time_s));
+        if p.program_done == 1 {
+            s.push_str(" (done)");
+        }
+    }
+    for role in [
+        ServiceRole::Planner,
+        ServiceRole::Dynamics,
+        ServiceRole::Actuator,
+    ] {
+        match monitor.get(role) {
+            Some(st) => {
+                let rate = monitor
+                    .rate(role)
+                    .map(|r| format!("{r:.0}/s"))
+                    .unwrap_or_else(|| "-".into());
+                let health = if st.lifecycle == LifecycleState::Fault as u32 {
+                    " FAULT"
+                } else if st.stale_cycles > 0 || st.lost_messages > 0 || st.deadline_misses > 0 {
+                    " !"
+                } else {
+                    ""
+                };
+                s.push_str(&format!(" | {} {rate}{health}", role.name()));
+            }
+            None => s.push_str(&format!(" | {} -", role.name())),
+        }
+    }
+    if let Some(a) = monitor.get(ServiceRole::Actuator) {
+        s.push_str(&format!(
+            " | e2e p99 {:.0} µs",
+            a.latency.p99_ns as f64 / 1000.0
+        ));
+    }
+    let misses = monitor
+        .get(ServiceRole::Planner)
+        .map_or(0, |p| p.deadline_misses);
+    let lost: u64 = ROLES
+        .iter()
+        .filter_map(|r| monitor.get(*r))
+        .map(|s| s.lost_messages)
+        .sum();
+    s.push_str(&format!(" | misses {misses} lost {lost}"));
+    s
+}
+
+fn is_ready(monitor: &StatusMonitor, role: ServiceRole) -> bool {
+    monitor.get(role).is_some_and(|s| s.ready == 1)
+}
+
+/// Exit code of a service that failed: its own if it says bad config / instance in use.
+fn failure_code(status: std::process::ExitStatus) -> u8 {
+    match status.code() {
+        Some(c) if c == exit_code::BAD_CONFIG as i32 => exit_code::BAD_CONFIG,
+        Some(c) if c == exit_code::INSTANCE_IN_USE as i32 => exit_code::INSTANCE_IN_USE,
+        _ => exit_code::SERVICE_FAILED,
+    }
+}
+
+fn supervise(args: &RunArgs) -> Result<u8, Failure> {
+    let cfg = resolve_config(args)
+        .map_err(|e| e.context("bad config"))
+        .map_err(fail(exit_code::BAD_CONFIG))?;
+    let robot = Robot::from_file(&cfg.robot)
+        .map_err(|e| anyhow::anyhow!("bad config: robot: {e}"))
+        .map_err(fail(exit_code::BAD_CONFIG))?;
+    let dof = robot.dof();
+    let instance_name = cfg.instance.clone();
+
+    // One pipeline per instance: the lock refuses a second supervisor, the node scan a
+    // pipeline whose supervisor is gone but whose services still run.
+    let _lock = instance::lock_instance(&instance_name).map_err(|e| {
+        let code = if e.downcast_ref::<InstanceInUse>().is_some() {
+            exit_code::INSTANCE_IN_USE
+        } else {
+            exit_code::FAILURE
+        };
+        Failure { code, error: e }
+    })?;
+    let live = instance::live_nodes(&instance_name);
+    if let Some((name, pid)) = live.first() {
+        return Err(Failure {
+            code: exit_code::INSTANCE_IN_USE,
+            error: InstanceInUse {
+                instance: instance_name.clone(),
+                detail: format!("a live process (pid {pid}, node `{name}`) runs it"),
+            }
+            .into(),
+        });
+    }
+    let cleaned = instance::clean_leftovers(&instance_name);
+
+    let run_dir = instance::run_dir(&instance_name).map_err(fail(exit_code::FAILURE))?;
+    let resolved = run_dir.join("pipeline.resolved.toml");
+    std::fs::write(&resolved, cfg.to_toml_string())
+        .with_context(|| format!("cannot write {}", resolved.display()))
+        .map_err(fail(exit_code::FAILURE))?;
+
+    let stop_flag = Arc::new(AtomicBool::new(false));
+    {
+        let flag = stop_flag.clone();
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+            .context("cannot install the Ctrl-C handler")
+            .map_err(fail(exit_code::FAILURE))?;
+    }
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+
+    let mut progress = Progress::new(args.quiet);
+    if cleaned.dead_nodes > 0 || cleaned.orphaned_services > 0 {
+        progress.note(&format!(
+            "cleaned up after an earlier run: {} dead iceoryx2 node(s), {} orphaned service(s)",
+            cleaned.dead_nodes, cleaned.orphaned_services
+        ));
+    }
+    let mut monitor = StatusMonitor::open(
+        &instance_name,
+        &format!("microrobot-supervisor.{instance_name}"),
+    )
+    .map_err(fail(exit_code::FAILURE))?;
+
+    let started = Instant::now();
+    let mut pipe = Pipeline {
+        services: [None, None, None],
+        carried: [None; 3],
+        restarts: [0; 3],
+        restarting: [None; 3],
+    };
+    let ready_timeout = Duration::from_secs_f64(cfg.supervisor.ready_timeout_ms / 1000.0);
+    let grace = Duration::from_secs_f64((cfg.supervisor.stop_timeout_ms / 1000.0).max(1.0));
+    let program_given = cfg.program.is_some();
+
+    let mut outcome: Option<(Stop, u8, String)> = None;
+
+    // Start in order, each after the previous one is ready.
+    for role in ROLES {
+        let launch =
+            launch_for(role, &cfg, &resolved, &run_dir).map_err(fail(exit_code::FAILURE))?;
+        monitor.reset(role, monotonic_ns());
+        match Service::spawn(launch) {
+            Ok(s) => pipe.services[slot(role)] = Some(s),
+            Err(e) => {
+                outcome = Some((
+                    Stop::ServiceFailed,
+                    exit_code::SERVICE_FAILED,
+                    format!("{e:#}"),
+                ));
+                break;
+            }
+        }
+        let deadline = Instant::now() + ready_timeout;
+        loop {
+            let _ = monitor.poll();
+            if is_ready(&monitor, role) {
+                progress.note(&format!(
+                    "{} ready (pid {})",
+                    role.name(),
+                    pipe.service(role).map_or(0, |s| s.pid())
+                ));
+                break;
+            }
+            if stop_flag.load(Ordering::SeqCst) {
+                outcome = Some((Stop::Interrupted, exit_code::OK, String::new()));
+                break;
+            }
+            if let Some(s) = pipe.service(role)
+                && let Some(st) = s.poll_exit()
+            {
+                outcome = Some((
+                    Stop::ServiceFailed,
+                    failure_code(st),
+                    format!(
+                        "the {} service exited before it was ready ({}); its log {}:\n{}",
+                        role.name(),
+                        describe(st),
+                        s.launch.log.display(),
+                        log_tail(&s.launch.log, 15)
+                    ),
+                ));
+                break;
+            }
+            if Instant::now() >= deadline {
+                let log = pipe
+                    .service(role)
+                    .map(|s| s.launch.log.clone())
+                    .unwrap_or_default();
+                outcome = Some((
+                    Stop::Timeout,
+                    exit_code::TIMEOUT,
+                    format!(
+                        "the {} service did not report ready within {:.1} s (supervisor.ready_timeout_ms); its log {}:\n{}",
+                        role.name(),
+                        ready_timeout.as_secs_f64(),
+                        log.display(),
+                        log_tail(&log, 15)
+                    ),
+                ));
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        if outcome.is_some() {
+            break;
+        }
+    }
+
+    // Supervise until a stop condition.
+    let run_start = Instant::now();
+    while outcome.is_none() {
+        let _ = monitor.poll();
+        progress.update(&monitor, started);
+        if stop_flag.load(Ordering::SeqCst) {
+            outcome = Some((Stop::Interrupted, exit_code::OK, String::new()));
+            break;
+        }
+        if let Some(d) = cfg.duration_s
+            && run_start.elapsed().as_secs_f64() >= d
+        {
+            outcome = Some((Stop::Duration, exit_code::OK, String::new()));
+            break;
+        }
+        if program_given
+            && monitor
+                .get(ServiceRole::Planner)
+                .is_some_and(|p| p.program_done == 1)
+        {
+            outcome = Some((Stop::ProgramDone, exit_code::OK, String::new()));
+            break;
+        }
+        for role in ROLES {
+            let i = slot(role);
+            // A restarted service must report ready in time.
+            if let Some(since) = pipe.restarting[i] {
+                if is_ready(&monitor, role) {
+                    pipe.restarting[i] = None;
+                    progress.note(&format!("{} ready again after restart", role.name()));
+                } else if since.elapsed() >= ready_timeout {
+                    outcome = Some((
+                        Stop::Timeout,
+                        exit_code::TIMEOUT,
+                        format!(
+                            "the restarted {} service did not report ready within {:.1} s",
+                            role.name(),
+                            ready_timeout.as_secs_f64()
+                        ),
+                    ));
+                    break;
+                }
+            }
+            let Some(st) = pipe.service(role).and_then(|s| s.poll_exit()) else {
+                continue;
+            };
+            let log = pipe
+                .service(role)
+                .map(|s| s.launch.log.clone())
+                .unwrap_or_default();
+            let may_restart = cfg.supervisor.on_failure == FailurePolicy::Restart
+                && pipe.restarts[i] < cfg.supervisor.max_restarts;
+            if !may_restart {
+                outcome = Some((
+                    Stop::ServiceFailed,
+                    exit_code::SERVICE_FAILED,
+                    format!(
+                        "the {} service died ({}); stopping the pipeline (supervisor.on_failure = {}); its log {}:\n{}",
+                        role.name(),
+                        describe(st),
+                        if cfg.supervisor.on_failure == FailurePolicy::Restart {
+                            "restart, but max_restarts reached"
+                        } else {
+                            "stop_all"
+                        },
+                        log.display(),
+                        log_tail(&log, 15)
+                    ),
+                ));
+                break;
+            }
+            pipe.carry(role, &monitor);
+            pipe.restarts[i] += 1;
+            progress.note(&format!(
+                "{} died ({}); restarting it ({}/{})",
+                role.name(),
+                describe(st),
+                pipe.restarts[i],
+                cfg.supervisor.max_restarts
+            ));
+            // The dead process's iceoryx2 resources go before the new one opens its ports.
+            instance::clean_leftovers(&instance_name);
+            let launch = match pipe.services[i].take() {
+                Some(s) => s.launch,
+                None => continue,
+            };
+            monitor.reset(role, monotonic_ns());
+            match Service::spawn(launch) {
+                Ok(s) => {
+                    pipe.services[i] = Some(s);
+                    pipe.restarting[i] = Some(Instant::now());
+                }
+                Err(e) => {
+                    outcome = Some((
+                        Stop::ServiceFailed,
+                        exit_code::SERVICE_FAILED,
+                        format!("{e:#}"),
+                    ));
+                    break;
+                }
+            }
+        }
+        if outcome.is_none() {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    let (stop, mut code, message) =
+        outcome.unwrap_or((Stop::Interrupted, exit_code::OK, String::new()));
+    let all_clean = pipe.stop_all(&mut monitor, grace);
+    progress.finish();
+    if !message.is_empty() {
+        eprintln!("error: {message}");
+    }
+    let mut exits = [String::new(), String::new(), String::new()];
+    for role in ROLES {
+        let i = slot(role);
+        exits[i] = match pipe.services[i].as_mut().and_then(|s| s.poll_exit()) {
+            Some(st) => describe(st),
+            None => "not started".to_string(),
+        };
+    }
+    if code == exit_code::OK && !all_clean {
+        eprintln!(
+            "error: not every service exited cleanly ({})",
+            exits.join(", ")
+        );
+        code = exit_code::SERVICE_FAILED;
+    }
+    // Without final statuses the figures are partial: say so.
+    for role in ROLES {
+        if pipe.services[slot(role)].is_some()
+            && monitor
+                .get(role)
+                .is_some_and(|s| s.lifecycle != LifecycleState::Finalized as u32)
+            && code == exit_code::OK
+        {
+            eprintln!(
+                "warning: no final status from {} (last lifecycle {}); its figures may be a little short",
+                role.name(),
+                monitor
+                    .get(role)
+                    .map_or("none", |s| lifecycle_name(s.lifecycle))
+            );
+        }
+    }
+    let mut totals: [Option<ServiceStatus>; 3] = pipe.carried;
+    for role in ROLES {
+        let i = slot(role);
+        if let Some(st) = monitor.get(role) {
+            fold(totals[i].get_or_insert_with(ServiceStatus::default), st);
+        }
+    }
+    let summary = Summary::build(
+        RunFacts {
+            instance: instance_name.clone(),
+            exit_code: code,
+            stop_reason: stop.name().to_string(),
+            rate_hz: cfg.rate_hz,
+            lockstep: cfg.lockstep,
+            feedback: cfg.dynamics.feedback,
+            wall_time_s: started.elapsed().as_secs_f64(),
+            dof,
+            run_dir: run_dir.display().to_string(),
+        },
+        &totals,
+        &pipe.restarts,
+        &exits,
+    );
+    // Our own node goes first, then whatever the services left (nothing, normally).
+    drop(monitor);
+    instance::clean_leftovers(&instance_name);
+    println!("{}", summary.render());
+    if let Some(path) = &args.summary_json {
+        let text = serde_json::to_string_pretty(&summary)
+            .context("cannot serialise the summary")
+            .map_err(fail(exit_code::FAILURE))?;
+        std::fs::write(path, text + "\n")
+            .with_context(|| format!("cannot write {}", path.display()))
+            .map_err(fail(exit_code::FAILURE))?;
+    }
+    Ok(code)
+}

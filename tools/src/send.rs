@@ -1,6 +1,328 @@
-//! `microrobot send` (being written by the supervisor's owner).
-/// Arguments.
+//! `microrobot send`: one motion command (move, stop, e-stop, reset) to a running
+//! pipeline's planner, validated here first, and the planner's verdict reported from
+//! its status stream (`commands_accepted` / `commands_refused`).
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail, ensure};
+use iceoryx2::prelude::*;
+use iceoryx2::service::messaging_pattern::MessagingPattern;
+use microrobot_messages::{
+    CommandKind, MAX_JOINTS, MotionCommand, ProfileKind, ServiceKind, ServiceRole, TargetSpace,
+    monotonic_ns, open_event, open_publish_subscribe, service_name,
+};
+use microrobot_model::{JointKind, Robot};
+use microrobot_runtime::PipelineConfig;
+
+use crate::supervisor::monitor::StatusMonitor;
+
+/// Options of `microrobot send`.
 #[derive(Debug, clap::Args)]
-pub struct SendArgs {}
-/// Entry point.
-pub fn main(_args: SendArgs) -> anyhow::Result<()> { anyhow::bail!("send is not built yet") }
+pub struct SendArgs {
+    /// Instance name of the running pipeline.
+    #[arg(long, default_value = "default", value_name = "NAME")]
+    pub instance: String,
+    /// Pipeline config whose robot is used to check targets before sending (skipped
+    /// when the file does not exist).
+    #[arg(long, default_value = "config/pipeline.toml", value_name = "FILE")]
+    pub config: PathBuf,
+    /// How long to wait for the planner (connection and verdict), in s.
+    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    pub timeout: f64,
+    #[command(subcommand)]
+    pub command: SendCommand,
+}
+
+/// The command to send.
+#[derive(Debug, clap::Subcommand)]
+pub enum SendCommand {
+    /// Move to a joint target or a tool pose, replanning from the current setpoint.
+    Move(MoveArgs),
+    /// Stop smoothly (shortest jerk-limited stop), then hold.
+    Stop,
+    /// Emergency stop: brake at once; motion is refused until `reset`.
+    Estop,
+    /// Leave e-stop / the safe state; motion resumes from the measured state.
+    Reset,
+}
+
+/// Trajectory profile of a move.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Profile {
+    /// Time-optimal jerk-limited (soft motion); `--duration` stretches it.
+    Soft,
+    /// Cubic polynomial over `--duration`.
+    Cubic,
+    /// Quintic polynomial over `--duration`.
+    Quintic,
+    /// Linear segments with parabolic blends over `--duration`.
+    Lspb,
+}
+
+/// Target and profile of a move.
+#[derive(Debug, clap::Args)]
+#[command(group(clap::ArgGroup::new("target").required(true).args(["joints", "pose"])))]
+pub struct MoveArgs {
+    /// Joint target, comma separated (rad and m, or deg and mm with --deg).
+    #[arg(long, value_name = "Q1,Q2,...", allow_hyphen_values = true)]
+    pub joints: Option<String>,
+    /// Tool pose target: x,y,z (m) and a unit quaternion qw,qx,qy,qz.
+    #[arg(long, value_name = "X,Y,Z,QW,QX,QY,QZ", allow_hyphen_values = true)]
+    pub pose: Option<String>,
+    /// --joints in degrees (revolute) and mm (prismatic).
+    #[arg(long)]
+    pub deg: bool,
+    #[arg(long, value_enum, default_value = "soft")]
+    pub profile: Profile,
+    /// Duration in s (required for cubic, quintic, lspb; for soft, 0 = time-optimal).
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+    /// Scale (0, 1] of the robot's velocity, acceleration and jerk limits.
+    #[arg(long, default_value_t = 1.0, value_name = "SCALE")]
+    pub limit_scale: f64,
+}
+
+fn parse_list(text: &str, what: &str) -> anyhow::Result<Vec<f64>> {
+    let values = text
+        .split(',')
+        .map(|s| {
+            let s = s.trim();
+            s.parse::<f64>()
+                .with_context(|| format!("{what}: `{s}` is not a number"))
+        })
+        .collect::<anyhow::Result<Vec<f64>>>()?;
+    if let Some(v) = values.iter().find(|v| !v.is_finite()) {
+        bail!("{what}: {v} is not a finite number");
+    }
+    Ok(values)
+}
+
+/// The robot of the pipeline config, if the config file exists (so targets can be checked).
+fn robot_of(config: &std::path::Path) -> anyhow::Result<Option<Robot>> {
+    if !config.exists() {
+        return Ok(None);
+    }
+    let cfg = PipelineConfig::load(config).map_err(anyhow::Error::new)?;
+    let robot = Robot::from_file(&cfg.robot)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", cfg.robot.display()))?;
+    Ok(Some(robot))
+}
+
+/// Builds and validates the command (everything the planner would refuse that can be
+/// known here is refused here, with a message that names it).
+pub fn build_command(args: &SendArgs, robot: Option<&Robot>) -> anyhow::Result<MotionCommand> {
+    let mut cmd = MotionCommand {
+        seq: monotonic_ns(),
+        limit_scale: 1.0,
+        ..MotionCommand::default()
+    };
+    match &args.command {
+        SendCommand::Stop => cmd.kind = CommandKind::Stop as u32,
+        SendCommand::Estop => cmd.kind = CommandKind::EStop as u32,
+        SendCommand::Reset => cmd.kind = CommandKind::Reset as u32,
+        SendCommand::Move(m) => {
+            cmd.kind = CommandKind::Move as u32;
+            cmd.profile = match m.profile {
+                Profile::Soft => ProfileKind::Soft,
+                Profile::Cubic => ProfileKind::Cubic,
+                Profile::Quintic => ProfileKind::Quintic,
+                Profile::Lspb => ProfileKind::Lspb,
+            } as u32;
+            let duration = m.duration.unwrap_or(0.0);
+            ensure!(
+                duration.is_finite() && duration >= 0.0,
+                "--duration {duration}: must be a finite number of seconds >= 0"
+            );
+            if m.profile != Profile::Soft {
+                ensure!(
+                    duration > 0.0,
+                    "--profile {:?} needs --duration > 0 (s)",
+                    m.profile
+                );
+            }
+            ensure!(
+                duration <= 3600.0,
+                "--duration {duration}: longer than an hour is surely a mistake"
+            );
+            cmd.duration_s = duration;
+            ensure!(
+                m.limit_scale.is_finite() && m.limit_scale > 0.0 && m.limit_scale <= 1.0,
+                "--limit-scale {}: must be in (0, 1]",
+                m.limit_scale
+            );
+            cmd.limit_scale = m.limit_scale;
+            if let Some(text) = &m.joints {
+                let mut q = parse_list(text, "--joints")?;
+                ensure!(
+                    (1..=MAX_JOINTS).contains(&q.len()),
+                    "--joints: {} values, expected 1..={MAX_JOINTS}",
+                    q.len()
+                );
+                if let Some(robot) = robot {
+                    ensure!(
+                        q.len() == robot.dof(),
+                        "--joints: {} values, but robot `{}` has {} joints",
+                        q.len(),
+                        robot.name(),
+                        robot.dof()
+                    );
+                }
+                if m.deg {
+                    for (j, v) in q.iter_mut().enumerate() {
+                        let prismatic =
+                            robot.is_some_and(|r| r.joints()[j].kind == JointKind::Prismatic);
+                        *v = if prismatic {
+                            *v / 1000.0
+                        } else {
+                            v.to_radians()
+                        };
+                    }
+                }
+                if let Some(robot) = robot {
+                    for (j, (v, joint)) in q.iter().zip(robot.joints()).enumerate() {
+                        let l = &joint.limits;
+                        ensure!(
+                            l.contains(*v),
+                            "--joints: joint {} (`{}`) target {v:.6} is outside its limits [{:.6}, {:.6}] (SI units)",
+                            j + 1,
+                            joint.name,
+                            l.min,
+                            l.max
+                        );
+                    }
+                }
+                cmd.space = TargetSpace::Joint as u32;
+                cmd.dof = q.len() as u32;
+                cmd.target[..q.len()].copy_from_slice(&q);
+            } else if let Some(text) = &m.pose {
+                ensure!(
+                    !m.deg,
+                    "--deg applies to --joints only; --pose is in m and a quaternion"
+                );
+                let p = parse_list(text, "--pose")?;
+                ensure!(
+                    p.len() == 7,
+                    "--pose: {} values, expected 7 (x,y,z in m, then qw,qx,qy,qz)",
+                    p.len()
+                );
+                let norm = p[3..7].iter().map(|v| v * v).sum::<f64>().sqrt();
+                ensure!(
+                    (norm - 1.0).abs() <= 1e-3,
+                    "--pose: the quaternion (qw,qx,qy,qz) has norm {norm:.6}, expected a unit quaternion"
+                );
+                cmd.space = TargetSpace::Cartesian as u32;
+                cmd.dof = robot.map_or(0, |r| r.dof() as u32);
+                cmd.target[..3].copy_from_slice(&p[..3]);
+                for k in 0..4 {
+                    cmd.target[3 + k] = p[3 + k] / norm;
+                }
+            }
+        }
+    }
+    Ok(cmd)
+}
+
+/// Sends the command and reports the planner's verdict; an error if refused.
+pub fn main(args: SendArgs) -> anyhow::Result<()> {
+    ensure!(
+        args.timeout.is_finite() && args.timeout > 0.0,
+        "--timeout {}: must be a positive number of seconds",
+        args.timeout
+    );
+    let robot = robot_of(&args.config)
+        .with_context(|| format!("cannot check the target against {}", args.config.display()))?;
+    let mut cmd = build_command(&args, robot.as_ref())?;
+    iceoryx2::prelude::set_log_level_from_env_or(LogLevel::Error);
+
+    let instance = args.instance.as_str();
+    let timeout = Duration::from_secs_f64(args.timeout);
+    let name = service_name(instance, ServiceKind::Command);
+    let svc_name = ServiceName::new(&name).map_err(|e| anyhow::anyhow!("{name}: {e:?}"))?;
+    let exists = ipc::Service::does_exist(
+        &svc_name,
+        Config::global_config(),
+        MessagingPattern::PublishSubscribe,
+    )
+    .map_err(|e| anyhow::anyhow!("cannot look up {name}: {e:?}"))?;
+    ensure!(
+        exists,
+        "no pipeline `{instance}` is running (service {name} does not exist); start one with `microrobot run --instance {instance}`"
+    );
+
+    let mut monitor = StatusMonitor::open(
+        instance,
+        &format!("microrobot-send.{instance}.{}", std::process::id()),
+    )?;
+    let command_svc =
+        open_publish_subscribe::<MotionCommand>(monitor.node(), instance, ServiceKind::Command)?;
+    let publisher = command_svc
+        .publisher_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("command publisher: {e:?}"))?;
+    let notifier = open_event(monitor.node(), instance, ServiceKind::Command)?
+        .notifier_builder()
+        .create()
+        .map_err(|e| anyhow::anyhow!("command notifier: {e:?}"))?;
+
+    // The planner must be subscribed (a sample sent before it subscribes is lost) and
+    // have reported a status (the baseline of its accepted/refused counters).
+    let end = Instant::now() + timeout;
+    loop {
+        monitor.poll()?;
+        if command_svc.dynamic_config().number_of_subscribers() > 0
+            && monitor.get(ServiceRole::Planner).is_some()
+        {
+            break;
+        }
+        ensure!(
+            Instant::now() < end,
+            "the planner of `{instance}` did not connect within {:.1} s",
+            timeout.as_secs_f64()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // Let a status that was already on its way arrive, then take the baseline.
+    std::thread::sleep(Duration::from_millis(20));
+    monitor.poll()?;
+    let base = *monitor
+        .get(ServiceRole::Planner)
+        .context("planner status vanished")?;
+
+    cmd.stamp_ns = monotonic_ns();
+    publisher
+        .send_copy(cmd)
+        .map_err(|e| anyhow::anyhow!("cannot send the command: {e:?}"))?;
+    let _ = notifier.notify();
+
+    let end = Instant::now() + timeout;
+    loop {
+        monitor.poll()?;
+        if let Some(st) = monitor.get(ServiceRole::Planner) {
+            if st.pid != base.pid {
+                bail!(
+                    "the planner restarted while the command was in flight; its verdict is unknown"
+                );
+            }
+            if st.commands_refused > base.commands_refused {
+                bail!(
+                    "the planner of `{instance}` refused the command (refused commands: {}; see its log for why)",
+                    st.commands_refused
+                );
+            }
+            if st.commands_accepted > base.commands_accepted {
+                println!(
+                    "accepted by the planner of `{instance}` (command seq {})",
+                    cmd.seq
+                );
+                return Ok(());
+            }
+        }
+        ensure!(
+            Instant::now() < end,
+            "no verdict from the planner of `{instance}` within {:.1} s",
+            timeout.as_secs_f64()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}

@@ -1,0 +1,154 @@
+//! The status stream of one instance, as seen by the supervisor, `top` and `send`: the
+//! latest [`ServiceStatus`] per role, plus the one before it (for rates).
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use microrobot_messages::{ServiceKind, ServiceRole, ServiceStatus, open_publish_subscribe};
+
+/// Roles in pipeline start order.
+pub const ROLES: [ServiceRole; 3] = [
+    ServiceRole::Actuator,
+    ServiceRole::Dynamics,
+    ServiceRole::Planner,
+];
+
+/// Index of `role` in per-role arrays (planner 0, dynamics 1, actuator 2).
+pub fn slot(role: ServiceRole) -> usize {
+    match role {
+        ServiceRole::Planner => 0,
+        ServiceRole::Dynamics => 1,
+        ServiceRole::Actuator => 2,
+    }
+}
+
+/// One status and when it arrived here.
+#[derive(Debug, Clone, Copy)]
+pub struct Seen {
+    pub status: ServiceStatus,
+    pub at: Instant,
+}
+
+/// Subscriber to the status stream with the latest status per role.
+pub struct StatusMonitor {
+    _node: Node<ipc::Service>,
+    subscriber: Subscriber<ipc::Service, ServiceStatus, ()>,
+    /// Latest per role (index: [`slot`]).
+    pub latest: [Option<Seen>; 3],
+    /// The one before the latest, per role.
+    pub previous: [Option<Seen>; 3],
+    /// Statuses stamped before this (per role) are ignored: a predecessor's.
+    pub not_before_ns: [u64; 3],
+}
+
+impl StatusMonitor {
+    /// Subscribes to the status stream of `instance` with a node named `node_name`.
+    pub fn open(instance: &str, node_name: &str) -> anyhow::Result<Self> {
+        let name: NodeName = node_name
+            .try_into()
+            .map_err(|e| anyhow::anyhow!("invalid node name `{node_name}`: {e:?}"))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+        Self::with_node(node, instance)
+    }
+
+    /// Subscribes to the status stream of `instance` with `node`.
+    pub fn with_node(node: Node<ipc::Service>, instance: &str) -> anyhow::Result<Self> {
+        let subscriber =
+            open_publish_subscribe::<ServiceStatus>(&node, instance, ServiceKind::Status)?
+                .subscriber_builder()
+                .create()
+                .map_err(|e| anyhow::anyhow!("status subscriber: {e:?}"))?;
+        Ok(Self {
+            _node: node,
+            subscriber,
+            latest: [None; 3],
+            previous: [None; 3],
+            not_before_ns: [0; 3],
+        })
+    }
+
+    /// The node (to open more ports on it).
+    pub fn node(&self) -> &Node<ipc::Service> {
+        &self._node
+    }
+
+    /// Takes every waiting status; returns how many were new.
+    pub fn poll(&mut self) -> anyhow::Result<usize> {
+        let mut n = 0;
+        loop {
+            let st = match self.subscriber.receive() {
+                Ok(Some(sample)) => *sample,
+                Ok(None) => break,
+                Err(e) => anyhow::bail!("status receive: {e:?}"),
+            };
+            let Some(role) = ServiceRole::from_wire(st.role) else {
+                continue;
+            };
+            let i = slot(role);
+            if st.stamp_ns < self.not_before_ns[i] {
+                continue;
+            }
+            if let Some(prev) = &self.latest[i]
+                && prev.status.pid == st.pid
+                && prev.status.seq >= st.seq
+            {
+                continue;
+            }
+            self.previous[i] = self.latest[i].take();
+            self.latest[i] = Some(Seen {
+                status: st,
+                at: Instant::now(),
+            });
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// Forgets `role`'s statuses and ignores those stamped before `ns` (a restart).
+    pub fn reset(&mut self, role: ServiceRole, ns: u64) {
+        let i = slot(role);
+        self.latest[i] = None;
+        self.previous[i] = None;
+        self.not_before_ns[i] = ns;
+    }
+
+    /// Latest status of `role`.
+    pub fn get(&self, role: ServiceRole) -> Option<&ServiceStatus> {
+        self.latest[slot(role)].as_ref().map(|s| &s.status)
+    }
+
+    /// Cycles per second of `role` between its last two statuses (same process).
+    pub fn rate(&self, role: ServiceRole) -> Option<f64> {
+        let i = slot(role);
+        let (a, b) = (self.previous[i]?, self.latest[i]?);
+        if a.status.pid != b.status.pid || b.status.stamp_ns <= a.status.stamp_ns {
+            return None;
+        }
+        let dt = (b.status.stamp_ns - a.status.stamp_ns) as f64 * 1e-9;
+        Some(b.status.cycles.saturating_sub(a.status.cycles) as f64 / dt)
+    }
+
+    /// Polls until `done` holds or `timeout` passes; returns whether `done` held.
+    pub fn wait_for(
+        &mut self,
+        timeout: Duration,
+        mut done: impl FnMut(&Self) -> bool,
+    ) -> anyhow::Result<bool> {
+        let end = Instant::now() + timeout;
+        loop {
+            self.poll()?;
+            if done(self) {
+                return Ok(true);
+            }
+            if Instant::now() >= end {
+                return Ok(false);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+}

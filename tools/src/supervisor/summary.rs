@@ -1,0 +1,331 @@
+//! The run summary: per-service counters from the final statuses (summed over restarts),
+//! the headline figures, and its JSON form (`--summary-json`).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use microrobot_messages::{LatencySummary, LifecycleState, MAX_JOINTS, ServiceRole, ServiceStatus};
+use serde::Serialize;
+
+use super::monitor::slot;
+
+/// Latency percentiles in µs.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct Percentiles {
+    pub count: u64,
+    pub p50: f64,
+    pub p99: f64,
+    pub p999: f64,
+    pub max: f64,
+}
+
+impl From<&LatencySummary> for Percentiles {
+    fn from(l: &LatencySummary) -> Self {
+        let us = |ns: u64| ns as f64 / 1000.0;
+        Self {
+            count: l.count,
+            p50: us(l.p50_ns),
+            p99: us(l.p99_ns),
+            p999: us(l.p999_ns),
+            max: us(l.max_ns),
+        }
+    }
+}
+
+/// One service over the whole run.
+#[derive(Debug, Clone, Serialize)]
+pub struct ServiceSummary {
+    pub cycles: u64,
+    pub deadline_misses: u64,
+    pub skipped_ticks: u64,
+    pub lost_messages: u64,
+    pub refused_messages: u64,
+    pub stale_cycles: u64,
+    pub clamped_cycles: u64,
+    pub faults: u64,
+    pub commands_accepted: u64,
+    pub commands_refused: u64,
+    pub restarts: u32,
+    /// Lifecycle of the last status seen (`finalized` after a clean stop).
+    pub last_lifecycle: String,
+    /// How the (last) process ended: `exit code 0`, `killed by signal 9`, ...
+    pub exit: String,
+    pub cpu_time_ms: u64,
+    pub rss_kib: u64,
+    /// The service's own latency (planner: lateness, dynamics: setpoint→torque, actuator: end-to-end).
+    pub latency_us: Percentiles,
+}
+
+/// Everything `microrobot run` reports at the end.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    pub instance: String,
+    pub exit_ok: bool,
+    pub exit_code: u8,
+    /// Why the run stopped: program_done, duration, interrupted, service_failed, timeout.
+    pub stop_reason: String,
+    pub rate_hz: f64,
+    pub lockstep: bool,
+    pub feedback: bool,
+    pub wall_time_s: f64,
+    /// The planner's program (motion) time at the end.
+    pub program_time_s: f64,
+    pub cycles: BTreeMap<String, u64>,
+    /// Planner ticks that started more than one period late.
+    pub deadline_misses: u64,
+    /// Sequence gaps seen by every subscriber, summed.
+    pub lost_messages: u64,
+    pub refused_messages: u64,
+    pub stale_cycles: u64,
+    pub faults: u64,
+    pub restarts: u32,
+    /// Torque received by the actuator − publish time of its setpoint.
+    pub e2e_latency_us: Percentiles,
+    /// Planner wake-up − ideal tick time.
+    pub planner_lateness_us: Percentiles,
+    /// max |q_measured − q_setpoint| per joint (rad or m).
+    pub tracking_error_max_rad: Vec<f64>,
+    /// max |τ| commanded per joint (N·m or N).
+    pub peak_torque_nm: Vec<f64>,
+    pub services: BTreeMap<String, ServiceSummary>,
+    pub run_dir: String,
+}
+
+/// Adds the counters of `s` (one process's last status) into `acc` (over restarts):
+/// counters summed, peaks and latency percentiles as the larger of both.
+pub fn fold(acc: &mut ServiceStatus, s: &ServiceStatus) {
+    acc.role = s.role;
+    acc.lifecycle = s.lifecycle;
+    acc.pid = s.pid;
+    acc.cycles += s.cycles;
+    acc.deadline_misses += s.deadline_misses;
+    acc.skipped_ticks += s.skipped_ticks;
+    acc.lost_messages += s.lost_messages;
+    acc.refused_messages += s.refused_messages;
+    acc.stale_cycles += s.stale_cycles;
+    acc.clamped_cycles += s.clamped_cycles;
+    acc.faults += s.faults;
+    acc.commands_accepted += s.commands_accepted;
+    acc.commands_refused += s.commands_refused;
+    acc.motion_time_s = s.motion_time_s;
+    acc.program_done = s.program_done;
+    acc.cpu_time_ms = acc.cpu_time_ms.saturating_add(s.cpu_time_ms);
+    acc.rss_kib = acc.rss_kib.max(s.rss_kib);
+    let (a, b) = (&mut acc.latency, &s.latency);
+    a.count += b.count;
+    a.p50_ns = a.p50_ns.max(b.p50_ns);
+    a.p99_ns = a.p99_ns.max(b.p99_ns);
+    a.p999_ns = a.p999_ns.max(b.p999_ns);
+    a.p9999_ns = a.p9999_ns.max(b.p9999_ns);
+    a.max_ns = a.max_ns.max(b.max_ns);
+    for j in 0..MAX_JOINTS {
+        acc.tracking_error_max[j] = acc.tracking_error_max[j].max(s.tracking_error_max[j]);
+        acc.peak_torque[j] = acc.peak_torque[j].max(s.peak_torque[j]);
+    }
+}
+
+/// Lower-case lifecycle name.
+pub fn lifecycle_name(v: u32) -> &'static str {
+    match LifecycleState::from_wire(v) {
+        Some(LifecycleState::Unconfigured) => "unconfigured",
+        Some(LifecycleState::Inactive) => "inactive",
+        Some(LifecycleState::Active) => "active",
+        Some(LifecycleState::Fault) => "fault",
+        Some(LifecycleState::Finalized) => "finalized",
+        None => "unknown",
+    }
+}
+
+/// Inputs of [`Summary::build`] besides the per-role totals.
+pub struct RunFacts {
+    pub instance: String,
+    pub exit_code: u8,
+    pub stop_reason: String,
+    pub rate_hz: f64,
+    pub lockstep: bool,
+    pub feedback: bool,
+    pub wall_time_s: f64,
+    pub dof: usize,
+    pub run_dir: String,
+}
+
+impl Summary {
+    /// Builds the summary from per-role totals (index: [`slot`]), restart counts and exits.
+    pub fn build(
+        facts: RunFacts,
+        totals: &[Option<ServiceStatus>; 3],
+        restarts: &[u32; 3],
+        exits: &[String; 3],
+    ) -> Self {
+        let dof = facts.dof.min(MAX_JOINTS);
+        let mut services = BTreeMap::new();
+        let mut cycles = BTreeMap::new();
+        let role_of = [
+            ServiceRole::Planner,
+            ServiceRole::Dynamics,
+            ServiceRole::Actuator,
+        ];
+        for role in role_of {
+            let i = slot(role);
+            let st = totals[i].unwrap_or_default();
+            cycles.insert(role.name().to_string(), st.cycles);
+            services.insert(
+                role.name().to_string(),
+                ServiceSummary {
+                    cycles: st.cycles,
+                    deadline_misses: st.deadline_misses,
+                    skipped_ticks: st.skipped_ticks,
+                    lost_messages: st.lost_messages,
+                    refused_messages: st.refused_messages,
+                    stale_cycles: st.stale_cycles,
+                    clamped_cycles: st.clamped_cycles,
+                    faults: st.faults,
+                    commands_accepted: st.commands_accepted,
+                    commands_refused: st.commands_refused,
+                    restarts: restarts[i],
+                    last_lifecycle: if totals[i].is_some() {
+                        lifecycle_name(st.lifecycle).to_string()
+                    } else {
+                        "no status".to_string()
+                    },
+                    exit: exits[i].clone(),
+                    cpu_time_ms: st.cpu_time_ms as u64,
+                    rss_kib: st.rss_kib,
+                    latency_us: Percentiles::from(&st.latency),
+                },
+            );
+        }
+        let get = |role: ServiceRole| totals[slot(role)].unwrap_or_default();
+        let (planner, dynamics, actuator) = (
+            get(ServiceRole::Planner),
+            get(ServiceRole::Dynamics),
+            get(ServiceRole::Actuator),
+        );
+        let sum = |f: fn(&ServiceStatus) -> u64| totals.iter().flatten().map(f).sum::<u64>();
+        // Tracking error: the actuator's when it reports any (it sees setpoints), else dynamics'.
+        let tracking_src = if actuator.tracking_error_max[..dof].iter().any(|v| *v > 0.0) {
+            &actuator
+        } else {
+            &dynamics
+        };
+        Self {
+            instance: facts.instance,
+            exit_ok: facts.exit_code == 0,
+            exit_code: facts.exit_code,
+            stop_reason: facts.stop_reason,
+            rate_hz: facts.rate_hz,
+            lockstep: facts.lockstep,
+            feedback: facts.feedback,
+            wall_time_s: facts.wall_time_s,
+            program_time_s: planner.motion_time_s,
+            cycles,
+            deadline_misses: planner.deadline_misses,
+            lost_messages: sum(|s| s.lost_messages),
+            refused_messages: sum(|s| s.refused_messages),
+            stale_cycles: sum(|s| s.stale_cycles),
+            faults: sum(|s| s.faults),
+            restarts: restarts.iter().sum(),
+            e2e_latency_us: Percentiles::from(&actuator.latency),
+            planner_lateness_us: Percentiles::from(&planner.latency),
+            tracking_error_max_rad: tracking_src.tracking_error_max[..dof].to_vec(),
+            peak_torque_nm: dynamics.peak_torque[..dof].to_vec(),
+            services,
+            run_dir: facts.run_dir,
+        }
+    }
+
+    /// The human-readable summary.
+    pub fn render(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "microrobot run `{}`: {} after {:.2} s wall, program time {:.3} s, {} Hz{}{}",
+            self.instance,
+            self.stop_reason.replace('_', " "),
+            self.wall_time_s,
+            self.program_time_s,
+            self.rate_hz,
+            if self.lockstep { ", lockstep" } else { "" },
+            if self.feedback {
+                ", feedback on"
+            } else {
+                ", feed-forward only"
+            },
+        );
+        let _ = writeln!(
+            s,
+            "  {:<9} {:>9} {:>7} {:>6} {:>7} {:>6} {:>6} {:>8} {:>9} {:>9} {:>9}  exit",
+            "service",
+            "cycles",
+            "misses",
+            "lost",
+            "refused",
+            "stale",
+            "faults",
+            "restarts",
+            "p50 µs",
+            "p99 µs",
+            "max µs"
+        );
+        for name in ["planner", "dynamics", "actuator"] {
+            if let Some(v) = self.services.get(name) {
+                let _ = writeln!(
+                    s,
+                    "  {:<9} {:>9} {:>7} {:>6} {:>7} {:>6} {:>6} {:>8} {:>9.1} {:>9.1} {:>9.1}  {} ({})",
+                    name,
+                    v.cycles,
+                    v.deadline_misses,
+                    v.lost_messages,
+                    v.refused_messages,
+                    v.stale_cycles,
+                    v.faults,
+                    v.restarts,
+                    v.latency_us.p50,
+                    v.latency_us.p99,
+                    v.latency_us.max,
+                    v.exit,
+                    v.last_lifecycle,
+                );
+            }
+        }
+        let p = |x: &Percentiles| {
+            format!(
+                "p50 {:.1} / p99 {:.1} / p99.9 {:.1} / max {:.1} µs",
+                x.p50, x.p99, x.p999, x.max
+            )
+        };
+        let _ = writeln!(s, "  end-to-end latency: {}", p(&self.e2e_latency_us));
+        let _ = writeln!(s, "  planner lateness:   {}", p(&self.planner_lateness_us));
+        let fmt = |v: &[f64], scale: f64, prec: usize| {
+            v.iter()
+                .map(|x| format!("{:.*}", prec, x * scale))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let _ = writeln!(
+            s,
+            "  tracking error max: [{}] mrad",
+            fmt(&self.tracking_error_max_rad, 1e3, 4)
+        );
+        let _ = writeln!(
+            s,
+            "  peak torque:        [{}] N·m",
+            fmt(&self.peak_torque_nm, 1.0, 3)
+        );
+        let _ = writeln!(
+            s,
+            "  deadline misses {}, lost messages {}, logs in {}",
+            self.deadline_misses, self.lost_messages, self.run_dir
+        );
+        let _ = write!(
+            s,
+            "  result: {}",
+            if self.exit_ok {
+                "ok".to_string()
+            } else {
+                format!("FAILED (exit code {})", self.exit_code)
+            }
+        );
+        s
+    }
+}
