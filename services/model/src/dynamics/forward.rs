@@ -4,10 +4,10 @@
 
 use super::crba::mass_matrix_from_joint_values;
 use super::rnea::{RneaTerms, rnea_from_joint_values};
-use crate::JointVector;
 use crate::data::ModelData;
 use crate::kinematics::update_joint_values;
 use crate::robot::Robot;
+use crate::{JointVector, MAX_JOINTS};
 
 /// Why forward dynamics has no unique answer.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
@@ -71,7 +71,8 @@ pub fn try_forward_dynamics(
     for i in 0..n {
         x[i] = tau[i] - h[i];
     }
-    // Cholesky M = L Lᵀ on the dof block, lower triangle of data.chol.
+    // Cholesky M = L Lᵀ on the dof block, lower triangle of data.chol; the
+    // reciprocal pivots are kept so the solves multiply instead of divide.
     let m = &data.mass;
     let l = &mut data.chol;
     let mut scale = 0.0_f64;
@@ -79,6 +80,7 @@ pub fn try_forward_dynamics(
         scale = scale.max(m[(j, j)].abs());
     }
     let tiny = scale * 1e-14;
+    let mut inv_diag = [0.0; MAX_JOINTS];
     for j in 0..n {
         let mut diag = m[(j, j)];
         for k in 0..j {
@@ -93,6 +95,7 @@ pub fn try_forward_dynamics(
         let ljj = diag.sqrt();
         l[(j, j)] = ljj;
         let inv = 1.0 / ljj;
+        inv_diag[j] = inv;
         for i in (j + 1)..n {
             let mut v = m[(i, j)];
             for k in 0..j {
@@ -107,14 +110,14 @@ pub fn try_forward_dynamics(
         for k in 0..i {
             v -= l[(i, k)] * x[k];
         }
-        x[i] = v / l[(i, i)];
+        x[i] = v * inv_diag[i];
     }
     for i in (0..n).rev() {
         let mut v = x[i];
         for k in (i + 1)..n {
             v -= l[(k, i)] * x[k];
         }
-        x[i] = v / l[(i, i)];
+        x[i] = v * inv_diag[i];
     }
     Ok(x)
 }
