@@ -122,6 +122,7 @@ pub struct PlannerCore {
     full_limits: KinematicLimits,
     estop_limits: KinematicLimits,
     motion: Option<Generator>,
+    program_running: bool,
     current: Sample,
     mode: Mode,
     program: Option<ProgramRunner>,
@@ -163,6 +164,7 @@ impl PlannerCore {
             full_limits: scaled(robot, 1.0),
             estop_limits: scaled(robot, cfg.planner.estop_limit_scale),
             motion: None,
+            program_running: false,
             current: Sample::default(),
             mode: Mode::Hold,
             program_done: program.is_none(),
@@ -226,7 +228,7 @@ impl PlannerCore {
                 q,
                 ..Default::default()
             };
-            self.start_next_program_segment();
+            self.start_program();
         }
         true
     }
@@ -242,28 +244,31 @@ impl PlannerCore {
         Some(out)
     }
 
-    fn start_next_program_segment(&mut self) {
+    fn start_program(&mut self) {
         let Some(p) = self.program.as_mut() else {
             return;
         };
-        match p.next_segment(self.dof, &self.current.state(), &self.limits) {
-            Some(Ok(t)) => {
-                self.motion = Some(Generator::new(t));
+        match p.plan(&self.robot, &self.current.state(), &self.limits) {
+            Ok(()) => {
+                tracing::info!(
+                    "planner: program `{}` planned, {:.3} s",
+                    p.name(),
+                    p.duration()
+                );
+                self.program_running = true;
                 self.mode = Mode::Moving;
             }
-            Some(Err(e)) => {
+            Err(e) => {
                 tracing::error!(
-                    "planner: program segment cannot be planned, program abandoned: {e}"
+                    "planner: program cannot be planned from the measured state, program abandoned: {e}"
                 );
-                self.program = None;
-            }
-            None => {
                 self.program = None;
             }
         }
     }
 
     fn abandon_program(&mut self) {
+        self.program_running = false;
         if self.program.take().is_some() {
             tracing::warn!("planner: program abandoned by a run-time command");
         }
@@ -517,22 +522,29 @@ impl PlannerCore {
                 self.current = m;
             }
             flags |= setpoint_flags::HOLD_FOR_SAFE_STATE;
-        } else if let Some(g) = self.motion.as_mut() {
-            let (status, sample) = g.update(self.period_s);
-            self.current = sample;
-            flags |= setpoint_flags::MOVING;
-            if status == Status::Finished {
-                self.motion = None;
-                // Hold exactly at rest.
-                self.current.qd = JointVector::zeros();
-                self.current.qdd = JointVector::zeros();
-                self.current.jerk = JointVector::zeros();
-                match self.mode {
-                    Mode::Moving | Mode::Stopping => {
-                        self.mode = Mode::Hold;
-                        self.start_next_program_segment();
+        } else {
+            let step = if self.program_running {
+                self.program.as_mut().and_then(|p| p.update(self.period_s))
+            } else {
+                self.motion.as_mut().map(|g| g.update(self.period_s))
+            };
+            if let Some((status, sample)) = step {
+                self.current = sample;
+                flags |= setpoint_flags::MOVING;
+                if status == Status::Finished {
+                    self.motion = None;
+                    if self.program_running {
+                        self.program_running = false;
+                        self.program = None;
+                        tracing::info!("planner: program finished");
                     }
-                    _ => {}
+                    // Hold exactly at rest.
+                    self.current.qd = JointVector::zeros();
+                    self.current.qdd = JointVector::zeros();
+                    self.current.jerk = JointVector::zeros();
+                    if matches!(self.mode, Mode::Moving | Mode::Stopping) {
+                        self.mode = Mode::Hold;
+                    }
                 }
             }
         }

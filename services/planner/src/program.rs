@@ -1,39 +1,72 @@
-//! The planner's view of a motion program: a sequence of segments, each planned from
-//! the current setpoint state when the previous one has finished (so q, q̇, q̈ stay
-//! continuous). Wraps `microrobot_trajectory::program`.
+//! The planner's motion program: loaded and checked at start (a bad file is a config
+//! error), planned once from the arm's measured start state with
+//! `microrobot_trajectory::program` (segments hand over keeping q, q̇ and, where the
+//! profile allows, q̈ continuous), then stepped per tick without allocating.
 
 use std::path::Path;
 
 use microrobot_model::Robot;
-use microrobot_trajectory::{JointState, KinematicLimits, Trajectory, TrajectoryError};
+use microrobot_trajectory::model::ModelIk;
+use microrobot_trajectory::program::{Program, ProgramRunner as Runner};
+use microrobot_trajectory::{JointState, KinematicLimits, Sample, Status};
 
-/// Steps through a loaded program, one segment at a time.
+/// A loaded program, then (after [`ProgramRunner::plan`]) its running plan.
 #[derive(Debug, Clone)]
 pub struct ProgramRunner {
-    name: String,
+    program: Program,
+    runner: Option<Runner>,
 }
 
 impl ProgramRunner {
-    /// Loads and validates a program file for `robot`.
-    pub fn from_file(path: &Path, _robot: &Robot) -> Result<Self, String> {
-        Err(format!(
-            "{}: motion programs are not supported by this build of microrobot-trajectory yet",
-            path.display()
-        ))
+    /// Loads and checks a program file for `robot` (the joint count must match).
+    pub fn from_file(path: &Path, robot: &Robot) -> Result<Self, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+        let program = Program::from_toml_str(&text, &path.display().to_string())
+            .map_err(|e| e.to_string())?;
+        if program.dof != robot.dof() {
+            return Err(format!(
+                "{}: program.dof = {} but the robot `{}` has {} joints",
+                path.display(),
+                program.dof,
+                robot.name(),
+                robot.dof()
+            ));
+        }
+        Ok(Self {
+            program,
+            runner: None,
+        })
     }
 
-    /// Name of the program (file name).
+    /// The program's name.
     pub fn name(&self) -> &str {
-        &self.name
+        &self.program.name
     }
 
-    /// Plans the next segment from `start`, `None` when the program is finished.
-    pub fn next_segment(
+    /// Plans every segment from `start` within `limits` (allocates; done once).
+    pub fn plan(
         &mut self,
-        _dof: usize,
-        _start: &JointState,
-        _limits: &KinematicLimits,
-    ) -> Option<Result<Trajectory, TrajectoryError>> {
-        None
+        robot: &Robot,
+        start: &JointState,
+        limits: &KinematicLimits,
+    ) -> Result<(), String> {
+        let segments = self
+            .program
+            .plan_all(start, limits, &ModelIk::new(robot))
+            .map_err(|e| e.to_string())?;
+        self.runner = Runner::new(segments);
+        Ok(())
+    }
+
+    /// Total duration of the planned program (s), 0 before planning.
+    pub fn duration(&self) -> f64 {
+        self.runner.as_ref().map_or(0.0, |r| r.duration())
+    }
+
+    /// Advances by `dt`; `None` when nothing is planned.
+    #[inline]
+    pub fn update(&mut self, dt: f64) -> Option<(Status, Sample)> {
+        self.runner.as_mut().map(|r| r.update(dt))
     }
 }
