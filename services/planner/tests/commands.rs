@@ -1,0 +1,182 @@
+//! Motion commands: every field validated, refused commands never move the arm, and a
+//! replan mid-motion continues the setpoint stream without a jump.
+
+use std::path::PathBuf;
+
+use microrobot_messages::{
+    CommandKind, JointSetpoint, JointState, MotionCommand, ProfileKind, TargetSpace,
+};
+use microrobot_model::Robot;
+use microrobot_planner::{CommandError, Mode, PlannerCore};
+use microrobot_runtime::config::PipelineConfig;
+
+fn setup() -> PlannerCore {
+    let cfg = PipelineConfig {
+        robot: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml"),
+        ..Default::default()
+    };
+    let robot = Robot::from_file(&cfg.robot).unwrap();
+    let mut p = PlannerCore::new(&robot, &cfg, None);
+    let s = JointState {
+        dof: 6,
+        header: microrobot_messages::Header {
+            seq: 1,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    assert!(p.accept_state(&s, 1));
+    p
+}
+
+fn mv(target: [f64; 6], profile: ProfileKind, duration_s: f64) -> MotionCommand {
+    let mut c = MotionCommand {
+        kind: CommandKind::Move as u32,
+        profile: profile as u32,
+        space: TargetSpace::Joint as u32,
+        dof: 6,
+        duration_s,
+        ..Default::default()
+    };
+    c.target[..6].copy_from_slice(&target);
+    c
+}
+
+fn cmd(kind: CommandKind) -> MotionCommand {
+    MotionCommand {
+        kind: kind as u32,
+        ..Default::default()
+    }
+}
+
+const T: [f64; 6] = [0.5, 0.3, 0.2, 0.4, 0.3, -0.5];
+
+#[test]
+fn bad_commands_are_refused_and_do_not_move_the_arm() {
+    let mut p = setup();
+    let mut nan = mv(T, ProfileKind::Soft, 0.0);
+    nan.target[2] = f64::NAN;
+    let mut wrong_dof = mv(T, ProfileKind::Soft, 0.0);
+    wrong_dof.dof = 5;
+    let mut unknown = mv(T, ProfileKind::Soft, 0.0);
+    unknown.kind = 42;
+    let mut bad_profile = mv(T, ProfileKind::Soft, 0.0);
+    bad_profile.profile = 9;
+    let mut bad_scale = mv(T, ProfileKind::Soft, 0.0);
+    bad_scale.limit_scale = 1.5;
+    let mut inf_duration = mv(T, ProfileKind::Cubic, 1.0);
+    inf_duration.duration_s = f64::INFINITY;
+    let cases = [
+        (nan, "non-finite target"),
+        (wrong_dof, "wrong dof"),
+        (unknown, "unknown kind"),
+        (bad_profile, "unknown profile"),
+        (bad_scale, "limit scale"),
+        (inf_duration, "infinite duration"),
+        (
+            mv([0.5, 0.3, -0.2, 0.4, 0.3, -0.5], ProfileKind::Soft, 0.0),
+            "joint 3 below its 0° limit",
+        ),
+        (mv(T, ProfileKind::Cubic, 0.0), "cubic without duration"),
+        (
+            mv(T, ProfileKind::Cubic, 0.01),
+            "impossible duration (exceeds the velocity limit)",
+        ),
+        (mv(T, ProfileKind::Quintic, -1.0), "negative duration"),
+    ];
+    for (c, what) in cases {
+        assert!(p.on_command(&c, 1).is_err(), "{what} was accepted");
+    }
+    assert_eq!(p.counters.commands_refused, 10);
+    assert_eq!(p.counters.commands_accepted, 0);
+    for _ in 0..100 {
+        let sp = p.tick(1);
+        assert!(sp.q.iter().all(|&q| q == 0.0) && sp.qd.iter().all(|&v| v == 0.0));
+    }
+}
+
+#[test]
+fn stale_commands_are_refused() {
+    let mut p = setup();
+    let mut c = mv(T, ProfileKind::Soft, 0.0);
+    c.stamp_ns = 1;
+    assert!(matches!(
+        p.on_command(&c, 10_000_000_000),
+        Err(CommandError::Stale { .. })
+    ));
+}
+
+fn max_step(a: &JointSetpoint, b: &JointSetpoint) -> (f64, f64) {
+    let dq = (0..6).map(|i| (a.q[i] - b.q[i]).abs()).fold(0.0, f64::max);
+    let dqd = (0..6)
+        .map(|i| (a.qd[i] - b.qd[i]).abs())
+        .fold(0.0, f64::max);
+    (dq, dqd)
+}
+
+#[test]
+fn a_move_mid_motion_replans_without_a_jump() {
+    let mut p = setup();
+    p.on_command(&mv(T, ProfileKind::Soft, 0.0), 1).unwrap();
+    let mut prev = p.tick(1);
+    for _ in 0..1500 {
+        prev = p.tick(1);
+    }
+    assert!(
+        prev.qd.iter().any(|v| v.abs() > 0.05),
+        "moving at the switch"
+    );
+    p.on_command(
+        &mv([-0.3, 0.1, 0.5, 0.0, -0.2, 0.3], ProfileKind::Soft, 0.0),
+        1,
+    )
+    .unwrap();
+    let next = p.tick(1);
+    let (dq, dqd) = max_step(&prev, &next);
+    // One period at ≤ 2.4 rad/s moves ≤ 2.4 mrad; acceleration ≤ 1.4 rad/s² changes qd ≤ 1.4 mrad/s.
+    assert!(dq < 3e-3, "position step {dq}");
+    assert!(dqd < 2e-3, "velocity step {dqd}");
+    let dqdd = (0..6)
+        .map(|i| (prev.qdd[i] - next.qdd[i]).abs())
+        .fold(0.0, f64::max);
+    assert!(dqdd < 0.01, "soft motion keeps qdd continuous: step {dqdd}");
+}
+
+#[test]
+fn estop_brakes_and_refuses_motion_until_reset() {
+    let mut p = setup();
+    p.on_command(&mv(T, ProfileKind::Soft, 0.0), 1).unwrap();
+    for _ in 0..1500 {
+        p.tick(1);
+    }
+    p.on_command(&cmd(CommandKind::EStop), 1).unwrap();
+    assert_eq!(p.mode(), Mode::EStop);
+    assert!(matches!(
+        p.on_command(&mv(T, ProfileKind::Soft, 0.0), 1),
+        Err(CommandError::EStopActive)
+    ));
+    let mut last = p.tick(1);
+    for _ in 0..5000 {
+        last = p.tick(1);
+    }
+    assert!(last.qd.iter().all(|v| *v == 0.0), "at rest after the brake");
+    p.on_command(&cmd(CommandKind::Reset), 1).unwrap();
+    assert_eq!(p.mode(), Mode::Hold);
+    p.on_command(&mv(T, ProfileKind::Soft, 0.0), 1).unwrap();
+}
+
+#[test]
+fn stop_brings_the_arm_to_rest() {
+    let mut p = setup();
+    p.on_command(&mv(T, ProfileKind::Quintic, 4.0), 1).unwrap();
+    for _ in 0..1000 {
+        p.tick(1);
+    }
+    p.on_command(&cmd(CommandKind::Stop), 1).unwrap();
+    let mut last = p.tick(1);
+    for _ in 0..5000 {
+        last = p.tick(1);
+    }
+    assert!(last.qd.iter().all(|v| *v == 0.0));
+    assert!(p.program_done());
+}
