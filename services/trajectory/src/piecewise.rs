@@ -68,8 +68,9 @@ impl Kin {
     /// State after `t` seconds at constant jerk `j`.
     #[inline]
     pub fn advance(self, t: f64, j: f64) -> Kin {
+        const SIXTH: f64 = 1.0 / 6.0;
         Kin {
-            p: self.p + t * (self.v + t * (0.5 * self.a + t * j / 6.0)),
+            p: self.p + t * (self.v + t * (0.5 * self.a + t * j * SIXTH)),
             v: self.v + t * (self.a + 0.5 * t * j),
             a: self.a + t * j,
         }
@@ -182,15 +183,18 @@ impl Piecewise {
             hi = hi.max(c[0]);
             let len = self.end[i] - if i == 0 { 0.0 } else { self.end[i - 1] };
             let monotone = !quintic && {
+                // Velocity at both ends and at its extremum inside: one sign?
                 let v_end = c[1] + len * (2.0 * c[2] + len * 3.0 * c[3]);
-                let mut same = c[1] * v_end > 0.0;
-                if same && c[3] != 0.0 {
+                let (mut lo_v, mut hi_v) = (c[1].min(v_end), c[1].max(v_end));
+                if c[3] != 0.0 {
                     let x = -c[2] / (3.0 * c[3]);
                     if x > 0.0 && x < len {
-                        same = c[1] * (c[1] + x * (2.0 * c[2] + x * 3.0 * c[3])) > 0.0;
+                        let vx = c[1] + x * (2.0 * c[2] + x * 3.0 * c[3]);
+                        lo_v = lo_v.min(vx);
+                        hi_v = hi_v.max(vx);
                     }
                 }
-                same
+                lo_v >= 0.0 || hi_v <= 0.0
             };
             if !monotone {
                 let (a, b) = interior(&self.coefficients(i), len);

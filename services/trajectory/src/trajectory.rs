@@ -41,6 +41,34 @@ impl Trajectory {
     /// limits, synchronised so all joints finish together (see `sync`). Every profile
     /// must stay inside the position limits.
     pub fn plan(req: &MotionRequest) -> Result<Trajectory, TrajectoryError> {
+        let mut traj = Trajectory::empty();
+        traj.plan_into(req)?;
+        Ok(traj)
+    }
+
+    /// A trajectory of no joints, to [`Trajectory::plan_into`] later.
+    pub const fn empty() -> Trajectory {
+        Trajectory {
+            dof: 0,
+            duration: 0.0,
+            braked: false,
+            joints: [Piecewise::hold(0.0); MAX_JOINTS],
+        }
+    }
+
+    /// [`Trajectory::plan`] into an existing value, without moving the ~4 kB joint
+    /// table (what a planner loop replanning every cycle wants). On error `self` is
+    /// emptied (dof 0), so keep the running trajectory in another slot.
+    pub fn plan_into(&mut self, req: &MotionRequest) -> Result<(), TrajectoryError> {
+        let r = self.plan_inner(req);
+        if r.is_err() {
+            self.dof = 0;
+            self.duration = 0.0;
+        }
+        r
+    }
+
+    fn plan_inner(&mut self, req: &MotionRequest) -> Result<(), TrajectoryError> {
         let dof = req.dof;
         validate::dof(dof)?;
         validate::limits(dof, &req.limits)?;
@@ -60,14 +88,7 @@ impl Trajectory {
             false,
         )?;
         let (s, g) = (&req.start, &req.target);
-        // Built in place: the joint table is the bulk of the value.
-        let mut traj = Trajectory {
-            dof,
-            duration: 0.0,
-            braked: false,
-            joints: [Piecewise::hold(0.0); MAX_JOINTS],
-        };
-        let joints = &mut traj.joints;
+        let joints = &mut self.joints;
         let mut braked = false;
         let duration = match req.profile {
             Profile::Cubic { duration: t } => {
@@ -147,10 +168,10 @@ impl Trajectory {
                 duration
             }
         };
-        traj.duration = duration;
-        traj.braked = braked;
-        traj.check_positions(&req.limits)?;
-        Ok(traj)
+        self.dof = dof;
+        self.duration = duration;
+        self.braked = braked;
+        self.check_positions(&req.limits)
     }
 
     /// A trajectory that holds `q` forever (duration 0).

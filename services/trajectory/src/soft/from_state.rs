@@ -9,7 +9,7 @@
 //! the mirror image. Seen as jerk signs this is Ruckig's UDDU (or, mirrored, its DUUD)
 //! family with the VEL/ACC0/ACC1 variants, for rest targets.
 
-use super::velocity::velocity_change;
+use super::velocity::{ramp, velocity_change};
 use super::{Kin, Limits1, Phases, solve_tol, stop_velocity};
 
 /// The push duration after which the stop velocity reaches vmax (positive frame).
@@ -39,8 +39,21 @@ fn push(a0: f64, tau: f64, lim: &Limits1) -> Phases {
     ph
 }
 
-/// Push τ then stop: the whole profile (positive frame).
+/// End position of "push τ, then stop" (positive frame), without building phases.
 #[inline]
+fn push_then_stop_end(v0: f64, a0: f64, tau: f64, lim: &Limits1) -> f64 {
+    let t_a = ((lim.a - a0) / lim.j).max(0.0);
+    let k = Kin {
+        p: 0.0,
+        v: v0,
+        a: a0,
+    }
+    .advance(tau.min(t_a), lim.j)
+    .advance((tau - t_a).max(0.0), 0.0);
+    ramp(k.v, k.a, 0.0, lim).integrate(k).p
+}
+
+/// Push τ then stop: the whole profile (positive frame).
 pub fn push_then_stop(v0: f64, a0: f64, tau: f64, lim: &Limits1) -> (Phases, f64) {
     let start = Kin {
         p: 0.0,
@@ -49,16 +62,16 @@ pub fn push_then_stop(v0: f64, a0: f64, tau: f64, lim: &Limits1) -> (Phases, f64
     };
     let mut ph = push(a0, tau, lim);
     let k = ph.integrate(start);
-    let stop = velocity_change(k.v, k.a, 0.0, lim);
+    let stop = ramp(k.v, k.a, 0.0, lim);
     let end = stop.integrate(k);
-    ph.extend(&stop);
+    stop.push_to(&mut ph);
     (ph, end.p)
 }
 
 /// Position where the fastest stop from (v0, a0) ends, relative to the start.
 #[inline]
 pub fn brake_point(v0: f64, a0: f64, lim: &Limits1) -> f64 {
-    velocity_change(v0, a0, 0.0, lim)
+    ramp(v0, a0, 0.0, lim)
         .integrate(Kin {
             p: 0.0,
             v: v0,
@@ -84,7 +97,7 @@ pub fn time_optimal(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
 /// Positive-frame solution (d ≥ brake point).
 fn positive(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
     let tmax = tau_max(v0, a0, lim);
-    let (_, p_max) = push_then_stop(v0, a0, tmax, lim);
+    let p_max = push_then_stop_end(v0, a0, tmax, lim);
     if d >= p_max {
         // Reach vmax, cruise, stop.
         let start = Kin {

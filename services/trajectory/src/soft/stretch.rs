@@ -12,7 +12,7 @@
 //! synchronisation does with its blocked intervals.
 
 use super::from_state::brake_point;
-use super::velocity::{ramp_from_rest, velocity_change};
+use super::velocity::{ramp, ramp_from_rest, velocity_change};
 use super::{Kin, Limits1, Phases, rest_to_rest, solve_tol, stop_velocity};
 
 /// Prepared stretch problem for one joint (positive frame).
@@ -51,7 +51,7 @@ impl Stretch {
         let sg = if d >= pb { 1.0 } else { -1.0 };
         let (v, a, dd) = (sg * v0, sg * a0, sg * d);
         let dist = |vp: f64| {
-            let r1 = velocity_change(v, a, vp, lim);
+            let r1 = ramp(v, a, vp, lim);
             let k = r1.integrate(Kin { p: 0.0, v, a });
             let (_, _, d2) = ramp_from_rest(vp, lim);
             k.p + d2
@@ -67,7 +67,7 @@ impl Stretch {
             a0: a,
             d: dd,
             vp_hi,
-            t_stop: velocity_change(v, a, 0.0, lim).duration(),
+            t_stop: ramp(v, a, 0.0, lim).duration(),
             t_r2r: rest_to_rest::time_optimal((d - pb).abs(), lim).duration(),
             rest: false,
         }
@@ -105,7 +105,7 @@ impl Stretch {
     #[inline]
     fn f(&self, vp: f64, t: f64, lim: &Limits1) -> (f64, bool) {
         let (v, a) = (self.v0, self.a0);
-        let r1 = velocity_change(v, a, vp, lim);
+        let r1 = ramp(v, a, vp, lim);
         let k = r1.integrate(Kin { p: 0.0, v, a });
         let (t1, t2, d2) = ramp_from_rest(vp, lim);
         let tc = t - r1.duration() - 2.0 * t1 - t2;
