@@ -19,6 +19,8 @@ struct JointWork {
     t_brake: f64,
     /// Time-optimal duration including the brake.
     t_opt: f64,
+    /// Peak velocity of the optimal motion, anchoring its stretch.
+    anchor: Option<f64>,
 }
 
 pub(crate) fn limits1(l: &KinematicLimits, i: usize) -> Limits1 {
@@ -60,16 +62,16 @@ pub(crate) fn plan_soft(
         let t_brake = ph.duration();
         let after = ph.integrate(k0(i));
         let d = target_q[i] - after.p;
-        let opt = if after.v == 0.0 && after.a == 0.0 {
+        let (opt, anchor) = if after.v == 0.0 && after.a == 0.0 {
             let mut r = rest_to_rest::time_optimal(d.abs(), &lim);
             if d < 0.0 {
                 for p in &mut r.p[..r.n] {
                     p.j = -p.j;
                 }
             }
-            r
+            (r, None)
         } else {
-            from_state::time_optimal(after.v, after.a, d, &lim)
+            from_state::time_optimal_peak(after.v, after.a, d, &lim)
         };
         ph.extend(&opt);
         joints[i].set_phases(k0(i), &ph, Some(fin(i)));
@@ -77,6 +79,7 @@ pub(crate) fn plan_soft(
             after,
             t_brake,
             t_opt: t_brake + opt.duration(),
+            anchor,
         };
         t_sync = t_sync.max(work[i].t_opt);
     }
@@ -92,7 +95,13 @@ pub(crate) fn plan_soft(
             }
             let lim = limits1(limits, i);
             let st = *stretches[i].get_or_insert_with(|| {
-                Stretch::new(w.after.v, w.after.a, target_q[i] - w.after.p, &lim)
+                Stretch::with_anchor(
+                    w.after.v,
+                    w.after.a,
+                    target_q[i] - w.after.p,
+                    &lim,
+                    w.anchor,
+                )
             });
             match st.phases(t_sync - w.t_brake, &lim) {
                 Some(main) => {

@@ -82,20 +82,27 @@ pub fn brake_point(v0: f64, a0: f64, lim: &Limits1) -> f64 {
 
 /// Time-optimal phases (in the original frame) from (v0, a0) to rest at `d`.
 pub fn time_optimal(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
+    time_optimal_peak(v0, a0, d, lim).0
+}
+
+/// [`time_optimal`], plus the peak velocity (in the frame where the motion goes
+/// towards +) at which its acceleration crosses zero, when it does: the anchor of
+/// the stretch family ([`super::stretch::Stretch::with_anchor`]).
+pub fn time_optimal_peak(v0: f64, a0: f64, d: f64, lim: &Limits1) -> (Phases, Option<f64>) {
     let sg = if d >= brake_point(v0, a0, lim) {
         1.0
     } else {
         -1.0
     };
-    let mut ph = positive(sg * v0, sg * a0, sg * d, lim);
+    let (mut ph, peak) = positive(sg * v0, sg * a0, sg * d, lim);
     for p in &mut ph.p[..ph.n] {
         p.j *= sg;
     }
-    ph
+    (ph, peak)
 }
 
 /// Positive-frame solution (d ≥ brake point).
-fn positive(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
+fn positive(v0: f64, a0: f64, d: f64, lim: &Limits1) -> (Phases, Option<f64>) {
     let tmax = tau_max(v0, a0, lim);
     let p_max = push_then_stop_end(v0, a0, tmax, lim);
     if d >= p_max {
@@ -111,14 +118,20 @@ fn positive(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
         let end = stop.integrate(Kin { a: 0.0, ..k });
         ph.push((d - end.p) / lim.v, 0.0);
         ph.extend(&stop);
-        ph
+        (ph, Some(lim.v))
     } else {
         let tau = solve_tol(
-            |t| push_then_stop(v0, a0, t, lim).1 - d,
+            |t| push_then_stop_end(v0, a0, t, lim) - d,
             0.0,
             tmax,
             1e-15 * (1.0 + d.abs()),
         );
-        push_then_stop(v0, a0, tau, lim).0
+        let k = push(a0, tau, lim).integrate(Kin {
+            p: 0.0,
+            v: v0,
+            a: a0,
+        });
+        let peak = (k.a >= 0.0).then(|| k.v + k.a * k.a / (2.0 * lim.j));
+        (push_then_stop(v0, a0, tau, lim).0, peak)
     }
 }

@@ -34,6 +34,12 @@ pub struct Stretch {
 impl Stretch {
     /// Prepares stretching the motion (v0, a0) → rest at displacement `d`.
     pub fn new(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Self {
+        Self::with_anchor(v0, a0, d, lim, None)
+    }
+
+    /// [`Stretch::new`] given the optimal motion's peak velocity (from
+    /// [`super::from_state::time_optimal_peak`]), which saves a root search.
+    pub fn with_anchor(v0: f64, a0: f64, d: f64, lim: &Limits1, anchor: Option<f64>) -> Self {
         if v0 == 0.0 && a0 == 0.0 {
             let t_r2r = rest_to_rest::time_optimal(d.abs(), lim).duration();
             return Self {
@@ -56,7 +62,9 @@ impl Stretch {
             let (_, _, d2) = ramp_from_rest(vp, lim);
             k.p + d2
         };
-        let vp_hi = if dd >= dist(lim.v) {
+        let vp_hi = if let Some(vp) = anchor {
+            vp.clamp(0.0, lim.v)
+        } else if dd >= dist(lim.v) {
             lim.v
         } else {
             solve_tol(|vp| dist(vp) - dd, 0.0, lim.v, 1e-14 * (1.0 + dd.abs()))
