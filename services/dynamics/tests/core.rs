@@ -1,0 +1,151 @@
+//! The torque law, clamping, feedback selection and input validation of the dynamics core.
+
+use std::path::PathBuf;
+
+use microrobot_dynamics::DynamicsCore;
+use microrobot_messages::{Header, JointSetpoint, JointState, torque_flags};
+use microrobot_model::{JointVector, ModelData, Robot, rnea};
+use microrobot_runtime::config::PipelineConfig;
+
+const MS: u64 = 1_000_000;
+
+fn cfg(lockstep: bool) -> PipelineConfig {
+    PipelineConfig {
+        robot: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml"),
+        lockstep,
+        ..Default::default()
+    }
+}
+
+fn sp(seq: u64, stamp: u64, q: [f64; 6], qdd: [f64; 6]) -> JointSetpoint {
+    let mut s = JointSetpoint {
+        header: Header {
+            seq,
+            tick: seq,
+            stamp_ns: stamp,
+            source_stamp_ns: stamp,
+        },
+        dof: 6,
+        ..Default::default()
+    };
+    s.q[..6].copy_from_slice(&q);
+    s.qdd[..6].copy_from_slice(&qdd);
+    s
+}
+
+fn state(seq: u64, tick: u64, stamp: u64, q: [f64; 6]) -> JointState {
+    let mut s = JointState {
+        header: Header {
+            seq,
+            tick,
+            stamp_ns: stamp,
+            source_stamp_ns: stamp,
+        },
+        dof: 6,
+        ..Default::default()
+    };
+    s.q[..6].copy_from_slice(&q);
+    s
+}
+
+const Q: [f64; 6] = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6];
+
+#[test]
+fn on_the_setpoint_at_rest_feedback_equals_inverse_dynamics() {
+    let c = cfg(false);
+    let robot = Robot::from_file(&c.robot).unwrap();
+    let mut d = DynamicsCore::new(&robot, &c);
+    let now = 1000 * MS;
+    d.accept_state(&state(1, 0, now, Q), 9).unwrap();
+    let t = d.compute(&sp(1, now, Q, [0.0; 6]), 1, now).unwrap();
+    assert_ne!(t.flags & torque_flags::FEEDBACK, 0);
+    let q = JointVector::from_column_slice(&[Q[0], Q[1], Q[2], Q[3], Q[4], Q[5], 0.0, 0.0]);
+    let z = JointVector::zeros();
+    let g = rnea(&robot, &mut ModelData::new(&robot), &q, &z, &z);
+    for i in 0..6 {
+        assert!(
+            (t.tau[i] - g[i]).abs() < 1e-9,
+            "joint {i}: {} vs {}",
+            t.tau[i],
+            g[i]
+        );
+    }
+    assert_eq!(t.state_seq, 1);
+    assert_eq!(t.q_desired[..6], Q);
+}
+
+#[test]
+fn stale_state_gives_flagged_feed_forward() {
+    let c = cfg(false);
+    let robot = Robot::from_file(&c.robot).unwrap();
+    let mut d = DynamicsCore::new(&robot, &c);
+    let now = 1000 * MS;
+    d.accept_state(&state(1, 0, now - 60 * MS, Q), 9).unwrap();
+    let t = d.compute(&sp(1, now, Q, [0.0; 6]), 1, now).unwrap();
+    assert_ne!(t.flags & torque_flags::STATE_STALE, 0);
+    assert_eq!(t.state_seq, u64::MAX);
+    assert_eq!(d.counters.stale_cycles, 1);
+}
+
+#[test]
+fn lockstep_uses_only_state_k_minus_1() {
+    let c = cfg(true);
+    let robot = Robot::from_file(&c.robot).unwrap();
+    let mut d = DynamicsCore::new(&robot, &c);
+    d.accept_state(&state(1, 4, 0, Q), 9).unwrap();
+    let t = d.compute(&sp(5, 0, Q, [0.0; 6]), 1, 0).unwrap();
+    assert_ne!(t.flags & torque_flags::FEEDBACK, 0);
+    let t = d.compute(&sp(7, 0, Q, [0.0; 6]), 1, 0).unwrap();
+    assert_ne!(
+        t.flags & torque_flags::STATE_STALE,
+        0,
+        "state 4 is not state 6"
+    );
+}
+
+#[test]
+fn torques_beyond_the_effort_limit_are_clamped_and_flagged() {
+    let c = cfg(false);
+    let robot = Robot::from_file(&c.robot).unwrap();
+    let mut d = DynamicsCore::new(&robot, &c);
+    let now = 1000 * MS;
+    d.accept_state(&state(1, 0, now, Q), 9).unwrap();
+    let t = d.compute(&sp(1, now, Q, [500.0; 6]), 1, now).unwrap();
+    assert_ne!(t.flags & torque_flags::CLAMPED, 0);
+    for i in 0..6 {
+        assert!(t.tau[i].abs() <= robot.joints()[i].limits.effort);
+    }
+    assert_eq!(d.counters.clamped_cycles, 1);
+}
+
+#[test]
+fn bad_setpoints_get_no_torque() {
+    let c = cfg(false);
+    let robot = Robot::from_file(&c.robot).unwrap();
+    let mut d = DynamicsCore::new(&robot, &c);
+    let now = 1000 * MS;
+    let mut nan = sp(1, now, Q, [0.0; 6]);
+    nan.qd[3] = f64::NAN;
+    assert!(d.compute(&nan, 1, now).is_err());
+    assert!(
+        d.compute(
+            &sp(2, now, [0.1, 0.2, -0.3, 0.4, 0.5, 0.6], [0.0; 6]),
+            1,
+            now
+        )
+        .is_err(),
+        "joint 3 below 0"
+    );
+    assert!(
+        d.compute(&sp(3, now - 80 * MS, Q, [0.0; 6]), 1, now)
+            .is_err(),
+        "stale"
+    );
+    assert!(d.compute(&sp(4, now, Q, [0.0; 6]), 1, now).is_ok());
+    assert!(
+        d.compute(&sp(4, now, Q, [0.0; 6]), 1, now).is_err(),
+        "duplicate"
+    );
+    assert_eq!(d.counters.refused, 4);
+    assert_eq!(d.counters.cycles, 1);
+}
