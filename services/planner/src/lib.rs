@@ -135,6 +135,9 @@ pub struct PlannerCore {
     pub counters: Counters,
     /// Last command error, for logging by the caller.
     pub last_error: Option<CommandError>,
+    estop_at_ns: Option<u64>,
+    /// Time from the last e-stop command's receipt to its first braking setpoint (ns).
+    pub last_estop_latency_ns: Option<u64>,
 }
 
 fn scaled(robot: &Robot, scale: f64) -> KinematicLimits {
@@ -175,6 +178,8 @@ impl PlannerCore {
             last_state: None,
             counters: Counters::default(),
             last_error: None,
+            estop_at_ns: None,
+            last_estop_latency_ns: None,
         }
     }
 
@@ -333,6 +338,7 @@ impl PlannerCore {
             }
             CommandKind::EStop => {
                 self.counters.estops += 1;
+                self.estop_at_ns = Some(now_ns);
                 self.abandon_program();
                 if self.mode == Mode::SafeHold {
                     // The actuator already holds; stay with it, but remember the e-stop.
@@ -563,6 +569,14 @@ impl PlannerCore {
         }
         if self.program_done {
             flags |= setpoint_flags::PROGRAM_DONE;
+        }
+        if let Some(t) = self.estop_at_ns.take() {
+            let l = now_ns.saturating_sub(t);
+            self.last_estop_latency_ns = Some(l);
+            tracing::info!(
+                "planner: e-stop: first braking setpoint {:.1} µs after the command",
+                l as f64 / 1e3
+            );
         }
         let mut sp = JointSetpoint {
             header: Header {
