@@ -8,7 +8,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use microrobot_trajectory::{
-    JointState, JointVector, KinematicLimits, MotionRequest, Profile, Trajectory,
+    Generator, JointState, JointVector, KinematicLimits, MotionRequest, Profile, Trajectory,
 };
 
 /// Seed Table 4 limits (rad, s) for joints 1–6.
@@ -105,6 +105,16 @@ fn benches(c: &mut Criterion) {
                 t = 0.0;
             }
             tr.sample(black_box(t))
+        })
+    });
+    // The planner's per-cycle call: 1 kHz steps with the piece search cached.
+    let mut g = Generator::new(tr);
+    c.bench_function("trajectory/generator_update_6", |b| {
+        b.iter(|| {
+            if g.time() > 5.0 {
+                g.replace(tr);
+            }
+            g.update(black_box(0.001))
         })
     });
 }

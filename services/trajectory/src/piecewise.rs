@@ -218,13 +218,19 @@ impl Piecewise {
         })
     }
 
-    /// (q, qd, qdd, jerk) at time `t`; before 0 the start, after the end the final state.
+    /// (q, qd, qdd, jerk) at time `t`; before 0 the start, after the end the final
+    /// state. The piece search starts at `*hint` (the piece of the previous call) and
+    /// updates it: O(1) when time moves forward in small steps; any hint is safe.
     #[inline]
-    pub fn eval(&self, t: f64) -> [f64; 4] {
-        let mut i = 0;
+    pub fn eval_from(&self, t: f64, hint: &mut usize) -> [f64; 4] {
+        let mut i = (*hint).min(MAX_PHASES);
+        if i > 0 && (t < self.end[i - 1] || t.is_nan()) {
+            i = 0;
+        }
         while i < MAX_PHASES && t >= self.end[i] {
             i += 1;
         }
+        *hint = i;
         if i >= self.n {
             return [self.fin.p, self.fin.v, self.fin.a, 0.0];
         }

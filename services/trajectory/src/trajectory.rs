@@ -224,6 +224,15 @@ impl Trajectory {
     /// Allocation-free.
     #[inline]
     pub fn sample(&self, t: f64) -> Sample {
+        let mut hints = [0; MAX_JOINTS];
+        self.sample_from(t, &mut hints)
+    }
+
+    /// [`Trajectory::sample`] with per-joint piece hints carried between calls (what
+    /// [`crate::Generator`] does): each joint's piece search starts where the previous
+    /// sample found it. Start with zeros; any values are safe.
+    #[inline]
+    pub fn sample_from(&self, t: f64, hints: &mut [usize; MAX_JOINTS]) -> Sample {
         let mut out = [[0.0; MAX_JOINTS]; 4];
         let n = self.dof.min(MAX_JOINTS);
         if t >= self.duration {
@@ -235,8 +244,8 @@ impl Trajectory {
                 out[2][i] = f.a;
             }
         } else {
-            for (i, pw) in self.joints[..n].iter().enumerate() {
-                let [q, qd, qdd, j] = pw.eval(t);
+            for (i, (pw, hint)) in self.joints[..n].iter().zip(hints.iter_mut()).enumerate() {
+                let [q, qd, qdd, j] = pw.eval_from(t, hint);
                 out[0][i] = q;
                 out[1][i] = qd;
                 out[2][i] = qdd;

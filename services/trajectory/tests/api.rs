@@ -243,3 +243,24 @@ fn generator_steps_and_replans_without_jumps() {
     let copy: Trajectory = *g.trajectory(); // Copy, no heap.
     assert_eq!(copy.sample(0.25), g.trajectory().sample(0.25));
 }
+
+#[test]
+fn generator_cached_sampling_equals_plain_sampling_in_any_order() {
+    let req = soft_request(
+        &[0.0, 1.0],
+        &[0.3, -0.2],
+        &[0.1, 0.0],
+        &[2.0, -1.0],
+        limits(&[1.0, 2.0], &[1.0, 1.5], &[2.0, 3.0], 10.0),
+    );
+    let tr = Trajectory::plan(&req).expect("plans");
+    let mut g = Generator::new(tr);
+    let d = tr.duration();
+    // Forward, backward, past the end, negative, NaN-free jumps.
+    for &f in &[
+        0.1, 0.5, 0.49, 0.9, 0.2, 1.5, 0.95, -0.1, 0.0, 0.3, 0.31, 0.05, 1.0,
+    ] {
+        let t = f * d;
+        assert_eq!(g.at(t).1, tr.sample(t), "at {t}");
+    }
+}
