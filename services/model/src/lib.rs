@@ -35,6 +35,8 @@
 //! assert!((tau[0] - 4.905).abs() < 1e-12);
 //! ```
 
+#![warn(missing_docs)]
+
 mod data;
 pub mod dynamics;
 pub mod ik;
