@@ -264,3 +264,30 @@ fn generator_cached_sampling_equals_plain_sampling_in_any_order() {
         assert_eq!(g.at(t).1, tr.sample(t), "at {t}");
     }
 }
+
+#[test]
+fn synchronised_motion_with_a_braking_joint_stays_within_limits_after_the_brake() {
+    // Joint 0 is about to cross vmax (0.9 + 0.8²/(2·1) > 1); joint 1 starts at rest.
+    let lim = limits(&[1.0, 1.0], &[1.0, 1.0], &[1.0, 1.0], 20.0);
+    let req = soft_request(&[0.0, 0.0], &[0.9, 0.0], &[0.8, 0.0], &[-2.0, 0.5], lim);
+    let tr = Trajectory::plan(&req).expect("plans");
+    assert!(tr.braked());
+    let n = 20_000;
+    let mut peak = 0.0f64;
+    for k in 0..=n {
+        let s = tr.sample(tr.duration() * k as f64 / n as f64);
+        peak = peak.max(s.qd[0].abs());
+        assert!(s.qd[0].abs() <= 0.9 + 0.8 * 0.8 / 2.0 + 1e-9);
+        assert!(s.qd[1].abs() <= 1.0 + 1e-9 && s.qdd[1].abs() <= 1.0 + 1e-9);
+        assert!(s.qdd[0].abs() <= 1.0 + 1e-9 && s.jerk[0].abs() <= 1.0 + 1e-9);
+    }
+    assert!(peak > 1.0, "the unavoidable overshoot happens");
+    let end = tr.sample(tr.duration());
+    assert_eq!(
+        (end.q[0], end.q[1], end.qd[0], end.qd[1]),
+        (-2.0, 0.5, 0.0, 0.0)
+    );
+    // Both joints still move just before the common end.
+    let late = tr.sample(tr.duration() * 0.99);
+    assert!(late.qd[0].abs() > 0.0 && late.qd[1].abs() > 0.0);
+}
