@@ -5,9 +5,9 @@
 //! "a0", "a1", "cruise_velocity", "vmax", "amax", "jmax", "times": [t, ...]}` and writes
 //! one JSON line per input, in order: `{"duration", "q", "qd", "qdd", "jerk"}` sampled
 //! at `times`, or `{"error": "..."}` naming the field; the next line is processed
-//! either way (an optional `"id"` is echoed back). When any per-joint field is an array the line is one synchronised
-//! multi-joint problem (scalars apply to every joint) and the samples come back
-//! indexed [time][joint].
+//! either way (an optional `"id"` is echoed back). When any per-joint field is an
+//! array the line is one synchronised multi-joint problem (scalars apply to every
+//! joint) and the samples come back indexed [time][joint].
 
 use std::io::{BufRead, Write};
 
