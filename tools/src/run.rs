@@ -396,6 +396,7 @@ fn failure_code(status: std::process::ExitStatus) -> u8 {
 }
 
 fn supervise(args: &RunArgs) -> Result<u8, Failure> {
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let cfg = resolve_config(args)
         .map_err(|e| e.context("bad config"))
         .map_err(fail(exit_code::BAD_CONFIG))?;
@@ -441,7 +442,6 @@ fn supervise(args: &RunArgs) -> Result<u8, Failure> {
             .context("cannot install the Ctrl-C handler")
             .map_err(fail(exit_code::FAILURE))?;
     }
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
 
     let mut progress = Progress::new(args.quiet);
     if cleaned.dead_nodes > 0 || cleaned.orphaned_services > 0 {
