@@ -7,7 +7,7 @@
 //! every joint reaches, as Ruckig's time synchronisation does with blocked intervals.
 //! Every other joint is then stretched to T within its limits.
 
-use crate::piecewise::{Kin, Piecewise};
+use crate::piecewise::{Kin, Phases, Piecewise};
 use crate::soft::stretch::Stretch;
 use crate::soft::{Limits1, brake::brake, from_state, rest_to_rest};
 use crate::{JointState, KinematicLimits, MAX_JOINTS};
@@ -43,6 +43,8 @@ pub(crate) fn plan_soft(
     joints: &mut [Piecewise; MAX_JOINTS],
 ) -> (f64, bool) {
     let mut work = [JointWork::default(); MAX_JOINTS];
+    // Each joint's phases; written to `joints` once T is settled.
+    let mut plans = [Phases::default(); MAX_JOINTS];
     let mut braked = false;
     let mut t_sync = min_duration.unwrap_or(0.0);
     let k0 = |i: usize| Kin {
@@ -74,7 +76,7 @@ pub(crate) fn plan_soft(
             from_state::time_optimal_peak(after.v, after.a, d, &lim)
         };
         ph.extend(&opt);
-        joints[i].set_phases(k0(i), &ph, Some(fin(i)));
+        plans[i] = ph;
         work[i] = JointWork {
             after,
             t_brake,
@@ -107,7 +109,7 @@ pub(crate) fn plan_soft(
                 Some(main) => {
                     let mut ph = brake(k0(i), &lim);
                     ph.extend(&main);
-                    joints[i].set_phases(k0(i), &ph, Some(fin(i)));
+                    plans[i] = ph;
                 }
                 None => raise = raise.max(w.t_brake + st.guaranteed()),
             }
@@ -116,6 +118,9 @@ pub(crate) fn plan_soft(
             break;
         }
         t_sync = raise;
+    }
+    for i in 0..dof {
+        joints[i].set_phases(k0(i), &plans[i], Some(fin(i)));
     }
     (t_sync, braked)
 }
