@@ -1,7 +1,8 @@
 //! The seed's Lagrange-Euler formulation (eqs. 18–20) as corrected in DESIGN.md,
 //! written literally with 4×4 homogeneous matrices: the independent reference
-//! that the tests hold the Newton-Euler fast path against. Slow by design
-//! (O(n⁴) matrix products); not for the control loop.
+//! that the tests hold the Newton-Euler fast path against. Slow by design: every `U_pj` and `U_pjk` is a product of
+//! 4×4 matrices and every `D` a trace (O(n³) products, O(n⁴) traces; the sums are
+//! taken with `p` outermost so each matrix is formed once); not for the control loop.
 //!
 //! * `U_ij = ∂⁰T_i/∂q_j = ⁰T_{j−1} Q_j ʲ⁻¹T_i` for `j ≤ i`, else 0;
 //! * `U_ijk = ∂U_ij/∂q_k`, `Q` inserted at both joints, in chain order;
@@ -31,6 +32,8 @@ struct Chain {
     span: [[Mat4; MAX_JOINTS + 1]; MAX_JOINTS + 1],
     /// Pseudo-inertia `J_p` of body `p` about frame `p+1`'s origin.
     pseudo: [Mat4; MAX_JOINTS],
+    /// `u_mat[p][j] = U_pj` (zero for `j > p`).
+    u_mat: [[Mat4; MAX_JOINTS]; MAX_JOINTS],
 }
 
 /// `ʲ⁻¹T_j` of seed eq. 1 for joint `j` (zero-based) at position `q`.
@@ -101,20 +104,25 @@ impl Chain {
                 row[b] = row[b - 1] * local[b - 1];
             }
         }
+        let mut u_mat = [[Mat4::zeros(); MAX_JOINTS]; MAX_JOINTS];
+        for (p, row) in u_mat.iter_mut().enumerate().take(n) {
+            for (j, u) in row.iter_mut().enumerate().take(p + 1) {
+                // U_pj = ⁰T_j Q_j ʲT_{p+1}
+                *u = span[0][j] * q_mat[j] * span[j][p + 1];
+            }
+        }
         Chain {
             n,
             q_mat,
             span,
             pseudo,
+            u_mat,
         }
     }
 
     /// `U_pj = ∂⁰T_{p+1}/∂q_j = ⁰T_j Q_j ʲT_{p+1}` (zero-based `j <= p`), else 0.
-    fn u(&self, p: usize, j: usize) -> Mat4 {
-        if j > p {
-            return Mat4::zeros();
-        }
-        self.span[0][j] * self.q_mat[j] * self.span[j][p + 1]
+    fn u(&self, p: usize, j: usize) -> &Mat4 {
+        &self.u_mat[p][j]
     }
 
     /// `U_pjk = ∂²⁰T_{p+1}/∂q_j∂q_k`: `Q` inserted at both joints in chain order.
@@ -145,14 +153,16 @@ pub fn mass_matrix(robot: &Robot, q: &JointVector) -> MassMatrix {
 fn mass_matrix_of(robot: &Robot, ch: &Chain) -> MassMatrix {
     let n = ch.n;
     let mut m = MassMatrix::zeros();
-    for i in 0..n {
-        for j in 0..n {
-            let mut dij = 0.0;
-            for p in i.max(j)..n {
-                dij += trace_abt(&(ch.u(p, j) * ch.pseudo[p]), &ch.u(p, i));
+    // D_ij = Σ_{p ≥ max(i,j)} Tr(U_pj J_p U_piᵀ), summed over p outermost.
+    for p in 0..n {
+        for j in 0..=p {
+            let uj = ch.u(p, j) * ch.pseudo[p];
+            for i in 0..=p {
+                m[(i, j)] += trace_abt(&uj, ch.u(p, i));
             }
-            m[(i, j)] = dij;
         }
+    }
+    for i in 0..n {
         m[(i, i)] += robot.consts[i].rotor;
     }
     m
@@ -167,14 +177,20 @@ pub fn coriolis(robot: &Robot, q: &JointVector, qd: &JointVector) -> JointVector
 fn coriolis_of(ch: &Chain, qd: &JointVector) -> JointVector {
     let n = ch.n;
     let mut tau = JointVector::zeros();
-    for i in 0..n {
-        for j in 0..n {
-            for k in 0..n {
-                let mut dijk = 0.0;
-                for p in i.max(j).max(k)..n {
-                    dijk += trace_abt(&(ch.u2(p, j, k) * ch.pseudo[p]), &ch.u(p, i));
+    // Σ_j Σ_k D_ijk q̇_j q̇_k with D_ijk = Σ_{p ≥ max(i,j,k)} Tr(U_pjk J_p U_piᵀ),
+    // summed over p outermost; U_pjk = U_pkj, so each pair j < k counts twice.
+    for p in 0..n {
+        for j in 0..=p {
+            for k in j..=p {
+                let ujk = ch.u2(p, j, k) * ch.pseudo[p];
+                let weight = if j == k {
+                    qd[j] * qd[j]
+                } else {
+                    2.0 * qd[j] * qd[k]
+                };
+                for i in 0..=p {
+                    tau[i] += trace_abt(&ujk, ch.u(p, i)) * weight;
                 }
-                tau[i] += dijk * qd[j] * qd[k];
             }
         }
     }
