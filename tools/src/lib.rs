@@ -5,5 +5,6 @@ pub mod eval_trajectory;
 pub mod run;
 pub mod send;
 pub mod service;
+pub mod study;
 pub mod supervisor;
 pub mod top;

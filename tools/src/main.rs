@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use microrobot_cli::{eval_model, eval_trajectory, run, send, service, top};
+use microrobot_cli::{eval_model, eval_trajectory, run, send, service, study, top};
 
 #[derive(Parser)]
 #[command(name = "microrobot", version, about = "Real-time motion stack for a 6-DOF surgical arm")]
@@ -25,6 +25,8 @@ enum Command {
     Send(send::SendArgs),
     /// Show live rates, latencies and health of a running pipeline.
     Top(top::TopArgs),
+    /// Regenerate the seed's study (tables, workspace, Jacobian, trajectories, torques, verdicts).
+    Study(study::StudyArgs),
     /// Evaluate a model or a trajectory: JSON lines in on stdin, JSON lines out on stdout.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -54,6 +56,7 @@ fn main() -> ExitCode {
         Command::Run(args) => return run::main(args),
         Command::Send(args) => send::main(args),
         Command::Top(args) => top::main(args),
+        Command::Study(args) => study::main(args),
         Command::Service(args) => return service::main(args),
         Command::Eval(EvalCommand::Model { robot, method }) => eval_model::run(&robot, method),
         Command::Eval(EvalCommand::Trajectory) => eval_trajectory::run(),

@@ -1,0 +1,332 @@
+//! The seed's conclusions checked against the computed numbers. Every verdict is
+//! derived from the cases, the searches and the Jacobian; nothing is written in.
+
+use microrobot_model::Robot;
+use serde::Serialize;
+
+use super::cases::{Case, Method, PARTS};
+use super::kinematics::{Sweep, max_jacobian_element};
+use super::mintime::{MinTime, check};
+use super::motion::StudyMotion;
+
+/// One claim of the seed and what the numbers say about it.
+#[derive(Debug, Clone, Serialize)]
+pub struct Verdict {
+    /// Stable identifier (tests look verdicts up by it).
+    pub id: &'static str,
+    /// The seed's claim, with its section.
+    pub claim: String,
+    /// What was computed.
+    pub finding: String,
+    /// Whether the numbers support the claim.
+    pub holds: bool,
+    /// The computed value the verdict turns on (e.g. a joint number), for machines.
+    pub value: String,
+}
+
+const RAD2DEG: f64 = 180.0 / std::f64::consts::PI;
+
+fn joint_with<F: Fn(f64, f64) -> bool>(cases: &[Case], dof: usize, better: F) -> (usize, f64) {
+    let mut best = (0, f64::NAN);
+    for i in 0..dof {
+        let v = cases
+            .iter()
+            .fold(0.0f64, |m, c| m.max(c.stats.peak_torque[i]));
+        if best.1.is_nan() || better(v, best.1) {
+            best = (i, v);
+        }
+    }
+    best
+}
+
+fn dominant(c: &Case) -> usize {
+    let p = c.stats.rms_parts;
+    (0..3).fold(0, |b, i| if p[i] > p[b] { i } else { b })
+}
+
+/// Computes every verdict. `cases` holds each method at each of `final_times`.
+pub fn compute(
+    robot: &Robot,
+    motion: &StudyMotion,
+    cases: &[Case],
+    mintimes: &[MinTime],
+    sweeps: &[Sweep],
+    final_times: &[f64],
+    check_samples: usize,
+) -> Vec<Verdict> {
+    let dof = robot.dof();
+    let mut out = Vec::new();
+    let case = |m: Method, tf: f64| cases.iter().find(|c| c.method == m && c.tf == tf);
+    let t_short = final_times.iter().copied().fold(f64::INFINITY, f64::min);
+    let t_long = final_times
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+
+    // 1. Highest torque at joint 1.
+    let (hi_j, hi_v) = joint_with(cases, dof, |a, b| a > b);
+    let wins: Vec<String> = (0..dof)
+        .map(|i| {
+            let n = cases
+                .iter()
+                .filter(|c| (0..dof).all(|k| c.stats.peak_torque[i] >= c.stats.peak_torque[k]))
+                .count();
+            format!("j{}: {n}", i + 1)
+        })
+        .collect();
+    let grav = robot.gravity();
+    out.push(Verdict {
+        id: "highest_torque_joint",
+        claim: "The highest hub torque is at joint 1 (sections 5.2.1-5.2.4, 5.3, 6).".into(),
+        finding: format!(
+            "Joint {} carries the highest peak torque, {:.3} N·m over all {} cases (cases in which each joint is highest: {}). Gravity is ({:.2}, {:.2}, {:.2}) m/s² in the base frame.",
+            hi_j + 1,
+            hi_v,
+            cases.len(),
+            wins.join(", "),
+            grav.x,
+            grav.y,
+            grav.z
+        ),
+        holds: hi_j == 0,
+        value: format!("{}", hi_j + 1),
+    });
+
+    // 2. Lowest torque at joint 6 (the last joint).
+    let (lo_j, lo_v) = joint_with(cases, dof, |a, b| a < b);
+    out.push(Verdict {
+        id: "lowest_torque_joint",
+        claim: format!("The actuator torque of joint {dof} is the lowest (sections 5.2, 5.3, 6)."),
+        finding: format!(
+            "Joint {} has the lowest peak torque, {:.3} N·m over all cases.",
+            lo_j + 1,
+            lo_v
+        ),
+        holds: lo_j + 1 == dof,
+        value: format!("{}", lo_j + 1),
+    });
+
+    // 3. Peak torque grows with the final time.
+    let mut grows = Vec::new();
+    let mut all_grow = true;
+    for m in Method::ALL {
+        if let (Some(a), Some(b)) = (case(m, t_short), case(m, t_long)) {
+            let pa = a.stats.peak_torque.max();
+            let pb = b.stats.peak_torque.max();
+            all_grow &= pb > pa;
+            grows.push(format!("{}: {pa:.3} → {pb:.3} N·m", m.key()));
+        }
+    }
+    out.push(Verdict {
+        id: "torque_grows_with_final_time",
+        claim: "Increasing the final time dramatically increases the peak joint torque (sections 5.2.2, 5.2.4).".into(),
+        finding: format!(
+            "Largest peak torque over joints at tf = {t_short} s → {t_long} s: {}.",
+            grows.join("; ")
+        ),
+        holds: all_grow,
+        value: format!("{all_grow}"),
+    });
+
+    // 4. Dominant torque term: inertia at short tf, Coriolis/centrifugal at long tf.
+    let mut dom = Vec::new();
+    let mut seed_pattern = true;
+    for m in Method::ALL {
+        if let (Some(a), Some(b)) = (case(m, t_short), case(m, t_long)) {
+            let (da, db) = (dominant(a), dominant(b));
+            seed_pattern &= da == 0 && db == 1;
+            dom.push(format!(
+                "{}: {} ({:.3} N·m RMS) at {t_short} s, {} ({:.3} N·m RMS) at {t_long} s",
+                m.key(),
+                PARTS[da],
+                a.stats.rms_parts[da],
+                PARTS[db],
+                b.stats.rms_parts[db]
+            ));
+        }
+    }
+    out.push(Verdict {
+        id: "dominant_torque_term",
+        claim: "At tf = 5 s the inertia term dominates the torque; longer final times shift the dominant term to the Coriolis and centrifugal terms (sections 5.2.2, 5.2.4).".into(),
+        finding: format!("Dominant part by RMS over time: {}.", dom.join("; ")),
+        holds: seed_pattern,
+        value: format!("{seed_pattern}"),
+    });
+
+    // 5. Soft motion has the fewest shootings.
+    let totals: Vec<(Method, usize)> = Method::ALL
+        .iter()
+        .map(|&m| {
+            (
+                m,
+                cases
+                    .iter()
+                    .filter(|c| c.method == m)
+                    .map(|c| c.stats.shootings.iter().sum::<usize>())
+                    .sum(),
+            )
+        })
+        .collect();
+    let fewest = totals.iter().map(|t| t.1).min().unwrap_or(0);
+    let soft_total = totals
+        .iter()
+        .find(|t| t.0 == Method::Soft)
+        .map(|t| t.1)
+        .unwrap_or(usize::MAX);
+    let fewest_methods: Vec<&str> = totals
+        .iter()
+        .filter(|t| t.1 == fewest)
+        .map(|t| t.0.key())
+        .collect();
+    out.push(Verdict {
+        id: "soft_fewest_shootings",
+        claim:
+            "Soft motion gives the torque history with the lowest number of shootings (section 6)."
+                .into(),
+        finding: format!(
+            "Torque-rate sign changes summed over joints and final times: {}. Fewest: {}.",
+            totals
+                .iter()
+                .map(|(m, n)| format!("{} {n}", m.key()))
+                .collect::<Vec<_>>()
+                .join(", "),
+            fewest_methods.join(", ")
+        ),
+        holds: soft_total == fewest,
+        value: fewest_methods.join(","),
+    });
+
+    // 6. The single-segment cubic exceeds the acceleration limit at the program's tf.
+    let tf_prog = motion.duration.unwrap_or(t_short);
+    if let Some(c) = case(Method::Cubic, tf_prog).or_else(|| case(Method::Cubic, t_short)) {
+        let over: Vec<String> = (0..dof)
+            .filter(|&i| {
+                c.peaks.acceleration[i]
+                    > robot.joints()[i].limits.acceleration * (1.0 + super::cases::LIMIT_TOL)
+            })
+            .map(|i| {
+                format!(
+                    "j{} {:.3} > {:.3} deg/s²",
+                    i + 1,
+                    c.peaks.acceleration[i] * RAD2DEG,
+                    robot.joints()[i].limits.acceleration * RAD2DEG
+                )
+            })
+            .collect();
+        out.push(Verdict {
+            id: "cubic_exceeds_acceleration",
+            claim: format!(
+                "In one segment the cubic needs more acceleration than the joints allow (section 5.2.1, eq. 21; the seed prints 0.62 against 0.6 deg/s²), at tf = {} s.",
+                c.tf
+            ),
+            finding: if over.is_empty() {
+                format!("At tf = {} s the cubic stays within every acceleration limit (peak 6|θf−θi|/tf²).", c.tf)
+            } else {
+                format!(
+                    "At tf = {} s the cubic's peak 6|θf−θi|/tf² exceeds the limit on {}.",
+                    c.tf,
+                    over.join(", ")
+                )
+            },
+            holds: !over.is_empty(),
+            value: format!("{}", over.len()),
+        });
+    }
+
+    // 7. Joints 1 and 2 do not move the tool along z; 8. joint 6 does not move it.
+    let z: Vec<f64> = (0..dof.min(2))
+        .map(|j| max_jacobian_element(robot, sweeps, j, 2))
+        .collect();
+    let scale = robot
+        .joints()
+        .iter()
+        .map(|j| j.dh.a.abs() + j.dh.d.abs())
+        .sum::<f64>()
+        .max(1e-3);
+    let z_holds = z.iter().all(|v| *v <= 1e-9 * scale);
+    out.push(Verdict {
+        id: "z_unaffected_by_joints_1_2",
+        claim: "The end-effector's differential translation along Z does not depend on joints 1 and 2 (section 2.4.4, Figure 12 a-b).".into(),
+        finding: format!(
+            "max |∂Pz/∂θ| over the sweeps and 2000 random configurations: {} mm/rad.",
+            z.iter()
+                .enumerate()
+                .map(|(j, v)| format!("joint {} {:.3e}", j + 1, v * 1e3))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        holds: z_holds,
+        value: format!("{z_holds}"),
+    });
+    let last = dof - 1;
+    let lin: f64 = (0..3)
+        .map(|a| max_jacobian_element(robot, sweeps, last, a))
+        .fold(0.0, f64::max);
+    let lin_holds = lin <= 1e-9 * scale;
+    out.push(Verdict {
+        id: "last_joint_does_not_translate_tool",
+        claim: format!(
+            "Joint {dof} does not move the end effector in X, Y or Z (section 2.4.4: its frame is aligned with the tool frame)."
+        ),
+        finding: format!(
+            "max |∂P/∂θ{dof}| over the sweeps and 2000 random configurations: {:.3e} mm/rad.",
+            lin * 1e3
+        ),
+        holds: lin_holds,
+        value: format!("{lin_holds}"),
+    });
+
+    // 9. The quintic at the longest tf goes back and forth.
+    if let Some(c) = case(Method::Quintic, t_long) {
+        let rev = c.stats.reversals.first().copied().unwrap_or(0);
+        out.push(Verdict {
+            id: "quintic_long_time_reverses",
+            claim: format!(
+                "With the quintic at tf = {t_long} s joint 1 does not move monotonically: it rises to 40°, falls to −40°, then reaches θf (section 5.2.2)."
+            ),
+            finding: format!(
+                "Joint 1's velocity changes sign {rev} times; its position spans [{:.2}°, {:.2}°] (θi = {:.2}°, θf = {:.2}°).",
+                c.peaks.position_min[0] * RAD2DEG,
+                c.peaks.position_max[0] * RAD2DEG,
+                motion.start[0] * RAD2DEG,
+                motion.target[0] * RAD2DEG
+            ),
+            holds: rev > 0,
+            value: format!("{rev}"),
+        });
+    }
+
+    // 10. The final times the seed selects respect the limits.
+    let selected = [
+        (Method::Cubic, 60.0),
+        (Method::Quintic, 5.0),
+        (Method::Lspb, 60.0),
+        (Method::Soft, 5.0),
+    ];
+    let mut parts = Vec::new();
+    let mut all_ok = true;
+    for (m, tf) in selected {
+        let why = check(robot, motion, m, tf, check_samples);
+        let min = mintimes
+            .iter()
+            .find(|t| t.method == m)
+            .and_then(|t| t.minimum)
+            .map(|v| format!("{v:.3} s"))
+            .unwrap_or_else(|| "none".into());
+        all_ok &= why.is_none();
+        parts.push(format!(
+            "{} at {tf} s: {} (searched minimum {min})",
+            m.key(),
+            why.map(|w| format!("breaks {w}"))
+                .unwrap_or_else(|| "within limits".into())
+        ));
+    }
+    out.push(Verdict {
+        id: "selected_final_times_feasible",
+        claim: "The final times the seed selects by inspection (cubic 60 s, quintic 5 s, LSPB 60 s, soft motion 5 s) are suitable (sections 5.2.1-5.2.4).".into(),
+        finding: format!("{}.", parts.join("; ")),
+        holds: all_ok,
+        value: format!("{all_ok}"),
+    });
+    out
+}
