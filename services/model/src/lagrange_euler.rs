@@ -1,8 +1,9 @@
 //! The seed's Lagrange-Euler formulation (eqs. 18–20) as corrected in DESIGN.md,
 //! written literally with 4×4 homogeneous matrices: the independent reference
-//! that the tests hold the Newton-Euler fast path against. Slow by design: every `U_pj` and `U_pjk` is a product of
-//! 4×4 matrices and every `D` a trace (O(n³) products, O(n⁴) traces; the sums are
-//! taken with `p` outermost so each matrix is formed once); not for the control loop.
+//! that the tests hold the Newton-Euler fast path against. Slow by design:
+//! every `U_pj` and `U_pjk` is a product of 4×4 matrices and every `D` a trace
+//! (O(n³) products, O(n⁴) traces; the sums are taken with `p` outermost so each
+//! matrix is formed once); not for the control loop.
 //!
 //! * `U_ij = ∂⁰T_i/∂q_j = ⁰T_{j−1} Q_j ʲ⁻¹T_i` for `j ≤ i`, else 0;
 //! * `U_ijk = ∂U_ij/∂q_k`, `Q` inserted at both joints, in chain order;
