@@ -33,7 +33,7 @@ pub struct WorkspaceOptions {
     pub seed: u64,
     /// At most this many points are kept in the point cloud (evenly thinned).
     pub max_points: usize,
-    /// Worker threads; 0 uses all available cores.
+    /// Worker threads; 0 uses all available cores (at most 64).
     pub threads: usize,
 }
 
@@ -130,6 +130,8 @@ impl Hasher for KeyHasher {
 type KeySet = HashSet<u64, BuildHasherDefault<KeyHasher>>;
 
 const CHUNK: usize = 8192;
+/// More workers than this only add overhead (and could fail to spawn).
+const MAX_THREADS: usize = 64;
 const AXIS_BITS: u32 = 21;
 const AXIS_OFFSET: i64 = 1 << (AXIS_BITS - 1);
 
@@ -183,7 +185,8 @@ pub fn reachable_workspace(
             .unwrap_or(1)
     } else {
         options.threads
-    };
+    }
+    .clamp(1, MAX_THREADS);
     let total = options.samples;
     let stride = total.div_ceil(options.max_points.max(1));
     let n_chunks = total.div_ceil(CHUNK);
@@ -209,7 +212,7 @@ pub fn reachable_workspace(
             if c >= n_chunks {
                 break;
             }
-            let end = ((c + 1) * CHUNK).min(total);
+            let end = (c + 1).saturating_mul(CHUNK).min(total);
             for s in c * CHUNK..end {
                 for j in 0..dof {
                     q[j] = lo[j] + uniform(options.seed, s as u64, j as u64) * (hi[j] - lo[j]);
@@ -237,7 +240,7 @@ pub fn reachable_workspace(
         }
     };
     std::thread::scope(|scope| {
-        for _ in 1..threads.max(1) {
+        for _ in 1..threads {
             scope.spawn(worker);
         }
         worker();
