@@ -271,6 +271,8 @@ pub(crate) struct Body {
     pub inertia_origin: Matrix3<f64>,
     /// Whether the centre of mass is off the frame origin (`h != 0`).
     pub has_h: bool,
+    /// Diagonal of `inertia_origin` when it has no products of inertia.
+    pub diagonal_inertia: Option<Vector3<f64>>,
 }
 
 impl Default for Body {
@@ -291,6 +293,9 @@ impl Body {
             h: c * l.mass,
             inertia_origin,
             has_h: c * l.mass != Vector3::zeros(),
+            diagonal_inertia: (inertia_origin
+                == Matrix3::from_diagonal(&inertia_origin.diagonal()))
+            .then(|| inertia_origin.diagonal()),
         }
     }
 }

@@ -146,13 +146,16 @@ pub(crate) fn rnea_from_joint_values(
                 + w.cross(&w.cross(&pstar));
         }
         let b = &robot.bodies[i];
-        let iw = b.inertia_origin * w;
+        let (iw, iwd) = match &b.diagonal_inertia {
+            Some(diag) => (diag.component_mul(&w), diag.component_mul(&wd)),
+            None => (b.inertia_origin * w, b.inertia_origin * wd),
+        };
         if b.has_h {
             data.force[i] = acc * b.mass + wd.cross(&b.h) + w.cross(&w.cross(&b.h));
-            data.moment[i] = b.inertia_origin * wd + w.cross(&iw) + b.h.cross(&acc);
+            data.moment[i] = iwd + w.cross(&iw) + b.h.cross(&acc);
         } else {
             data.force[i] = acc * b.mass;
-            data.moment[i] = b.inertia_origin * wd + w.cross(&iw);
+            data.moment[i] = iwd + w.cross(&iw);
         }
     }
     let mut tau = JointVector::zeros();
