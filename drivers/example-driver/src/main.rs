@@ -28,6 +28,8 @@ use microrobot_messages::{
 
 /// Status period (the contract asks for ~10 Hz).
 const STATUS_PERIOD_NS: u64 = 100_000_000;
+/// Period of the measured state before the first torque command (and of the wait loop).
+const IDLE_STATE_PERIOD_MS: u64 = 5;
 
 /// Command-line options.
 #[derive(Debug, Clone)]
@@ -343,12 +345,9 @@ fn run(opts: Options) -> Result<(), String> {
         .map_err(|e| format!("waitset attach: {e:?}"))?;
 
     let mut driver = Driver::new(opts);
-    // The initial measured state: the planner starts its motion from it (history 1).
-    let initial = driver.state(0, 0, u64::MAX, [0.0; MAX_JOINTS]);
-    state_pub
-        .send_copy(initial)
-        .map_err(|e| format!("publish initial state: {e:?}"))?;
-    let _ = state_notifier.notify();
+    // Until the first torque command arrives, report the measured state every few ms
+    // like a real drive does: the planner starts its motion from a fresh one.
+    let mut next_idle_state_ns = 0;
     let mut next_status_ns = 0;
     let mut error: Option<String> = None;
 
@@ -378,7 +377,7 @@ fn run(opts: Options) -> Result<(), String> {
                 }
                 CallbackProgression::Continue
             },
-            Duration::from_millis(20),
+            Duration::from_millis(IDLE_STATE_PERIOD_MS),
         );
         if let Err(e) = result {
             return Err(format!("waitset: {e:?}"));
@@ -387,6 +386,14 @@ fn run(opts: Options) -> Result<(), String> {
             return Err(e);
         }
         let now = monotonic_ns();
+        if driver.cycles == 0 && now >= next_idle_state_ns {
+            next_idle_state_ns = now + IDLE_STATE_PERIOD_MS * 1_000_000;
+            let idle = driver.state(0, 0, u64::MAX, [0.0; MAX_JOINTS]);
+            state_pub
+                .send_copy(idle)
+                .map_err(|e| format!("publish initial state: {e:?}"))?;
+            let _ = state_notifier.notify();
+        }
         if now >= next_status_ns {
             next_status_ns = now + STATUS_PERIOD_NS;
             status_pub
