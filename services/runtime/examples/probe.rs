@@ -8,6 +8,24 @@ use microrobot_messages::*;
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();
+    if args.get(1).map(String::as_str) == Some("floor") {
+        // `probe floor RATE_HZ SECONDS`: the bare timer loop with the default RT settings.
+        let rate: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1000.0);
+        let secs: f64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(10.0);
+        let cfg = microrobot_runtime::PipelineConfig::default();
+        let _rt = microrobot_runtime::rt::apply(&cfg.realtime);
+        let r = microrobot_runtime::timer::floor_probe((1e9 / rate) as u64, (secs * 1e9) as u64)?;
+        println!(
+            "floor {rate} Hz {secs} s: ticks {} misses {} lateness p50/p99/p99.9/max = {}/{}/{}/{} us",
+            r.ticks,
+            r.deadline_misses,
+            r.lateness.p50_ns / 1000,
+            r.lateness.p99_ns / 1000,
+            r.lateness.p999_ns / 1000,
+            r.lateness.max_ns / 1000
+        );
+        return Ok(());
+    }
     let inst = args.get(1).cloned().unwrap_or_else(|| "default".into());
     let secs: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(2.0);
     let node = NodeBuilder::new()

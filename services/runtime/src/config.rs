@@ -170,7 +170,8 @@ pub struct RealtimeConfig {
     pub pm_qos_latency_us: u32,
     /// `prctl(PR_SET_TIMERSLACK)` in ns (0: leave the kernel default of 50 µs).
     pub timer_slack_ns: u64,
-    /// SCHED_FIFO priority 1..=99, 0: stay SCHED_OTHER.
+    /// SCHED_FIFO priority 1..=99, 0: stay SCHED_OTHER. Not applied in lockstep (the
+    /// loop free-wheels there and would hog its CPU).
     pub sched_fifo_priority: u32,
     /// `mlockall(MCL_CURRENT | MCL_FUTURE)`.
     pub mlockall: bool,
@@ -268,7 +269,7 @@ impl Default for PipelineConfig {
                 pm_qos: true,
                 pm_qos_latency_us: 0,
                 timer_slack_ns: 1,
-                sched_fifo_priority: 0,
+                sched_fifo_priority: 80,
                 mlockall: true,
                 overrun: OverrunPolicy::Skip,
             },
@@ -762,7 +763,12 @@ impl Reader<'_> {
             )?,
         };
 
-        let t = self.tab(root, "", "dynamics", &["feedback", "delay_compensation", "kp_per_s2", "kd_per_s"])?;
+        let t = self.tab(
+            root,
+            "",
+            "dynamics",
+            &["feedback", "delay_compensation", "kp_per_s2", "kd_per_s"],
+        )?;
         let dd = &d.dynamics;
         let dynamics = DynamicsConfig {
             feedback: self.bool(&t, "feedback", dd.feedback)?,

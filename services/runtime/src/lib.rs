@@ -83,7 +83,12 @@ pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -
             return ExitCode::from(exit_code::BAD_CONFIG);
         }
     };
-    let rt = rt::apply(&cfg.realtime);
+    let mut rt_cfg = cfg.realtime.clone();
+    if cfg.lockstep {
+        // Lockstep runs as fast as the chain goes: no real-time priority for a busy loop.
+        rt_cfg.sched_fifo_priority = 0;
+    }
+    let rt = rt::apply(&rt_cfg);
     tracing::info!(
         "{} starting: instance `{}`, {} Hz{}, real-time settings applied: {:?}",
         role.name(),
