@@ -66,6 +66,7 @@ pub struct ActuatorCore<B: ActuatorBackend> {
     seq: SeqTracker,
     latest: Option<TorqueCommand>,
     latest_unapplied: bool,
+    steps_on_latest: u64,
     state_seq: u64,
     last_measured: Measured,
     /// Counters for the status.
@@ -104,6 +105,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             seq: SeqTracker::default(),
             latest: None,
             latest_unapplied: false,
+            steps_on_latest: 0,
             state_seq: 0,
             last_measured,
             counters: Counters::default(),
@@ -253,7 +255,9 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             }
             if use_cmd && self.latest_unapplied {
                 fresh_cmd = self.latest;
+                self.steps_on_latest = 0;
             }
+            self.steps_on_latest += 1;
             self.latest_unapplied = false;
         }
         if let Ok(m) = self.backend.read() {
@@ -288,7 +292,12 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         let mut s = JointState {
             header: Header {
                 seq: self.state_seq,
-                tick: self.latest.map(|c| c.header.tick).unwrap_or(0),
+                // The tick whose period this state ends: the command's tick, plus one per
+                // extra period the command was held (free-running, a late setpoint).
+                tick: self
+                    .latest
+                    .map(|c| c.header.tick + self.steps_on_latest.saturating_sub(1))
+                    .unwrap_or(0),
                 stamp_ns: now_ns,
                 source_stamp_ns: self.latest.map(|c| c.header.source_stamp_ns).unwrap_or(0),
             },

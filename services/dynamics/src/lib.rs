@@ -191,7 +191,14 @@ impl DynamicsCore {
                 // The state is one period older than the setpoint (it is the result of the
                 // previous torque); with delay compensation it is first predicted to the
                 // setpoint's time under the desired acceleration.
-                let h = if self.predict { self.period_s } else { 0.0 };
+                // Free-running, the state may be more than one tick old (after a missed
+                // tick the planner catches up): predict over the actual tick distance.
+                let ticks = sp.header.tick.saturating_sub(s.header.tick).clamp(1, 10);
+                let h = if self.predict {
+                    self.period_s * ticks as f64
+                } else {
+                    0.0
+                };
                 for i in 0..n {
                     let qp = q[i] + v[i] * h + 0.5 * ad[i] * h * h;
                     let vp = v[i] + ad[i] * h;

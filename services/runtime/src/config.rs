@@ -271,7 +271,7 @@ impl Default for PipelineConfig {
                 timer_slack_ns: 1,
                 sched_fifo_priority: 80,
                 mlockall: true,
-                overrun: OverrunPolicy::Skip,
+                overrun: OverrunPolicy::CatchUp,
             },
             supervisor: SupervisorConfig {
                 ready_timeout_ms: 10000.0,

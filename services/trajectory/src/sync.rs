@@ -23,6 +23,52 @@ struct JointWork {
     anchor: Option<f64>,
 }
 
+/// Every joint starts at rest: closed forms only (no brake, no blocked intervals,
+/// no root search). The same phases as the general path.
+fn plan_rest(
+    dof: usize,
+    q0: &crate::JointVector,
+    target_q: &crate::JointVector,
+    limits: &KinematicLimits,
+    min_duration: Option<f64>,
+    joints: &mut [Piecewise; MAX_JOINTS],
+) -> f64 {
+    let mut t_opt = [0.0; MAX_JOINTS];
+    let mut t_sync = min_duration.unwrap_or(0.0);
+    for i in 0..dof {
+        let d = (target_q[i] - q0[i]).abs();
+        t_opt[i] = rest_to_rest::time_optimal_duration(d, &limits1(limits, i));
+        t_sync = t_sync.max(t_opt[i]);
+    }
+    let eps = 1e-12 * t_sync.max(1.0);
+    for i in 0..dof {
+        let lim = limits1(limits, i);
+        let d = target_q[i] - q0[i];
+        let mut ph = if t_sync - t_opt[i] <= eps {
+            rest_to_rest::time_optimal(d.abs(), &lim)
+        } else {
+            rest_to_rest::stretched(d.abs(), t_sync, &lim)
+        };
+        if d < 0.0 {
+            for p in &mut ph.p[..ph.n] {
+                p.j = -p.j;
+            }
+        }
+        let start = Kin {
+            p: q0[i],
+            v: 0.0,
+            a: 0.0,
+        };
+        let fin = Kin {
+            p: target_q[i],
+            v: 0.0,
+            a: 0.0,
+        };
+        joints[i].set_phases(start, &ph, Some(fin));
+    }
+    t_sync
+}
+
 pub(crate) fn limits1(l: &KinematicLimits, i: usize) -> Limits1 {
     Limits1 {
         v: l.velocity[i],
@@ -32,8 +78,9 @@ pub(crate) fn limits1(l: &KinematicLimits, i: usize) -> Limits1 {
 }
 
 /// Plans every joint from `start` to rest at `target_q`, synchronised, writing the
-/// motions into `joints` in place. Returns the common duration and whether any
-/// joint braked.
+/// motions into `joints` in place. Returns the common duration, whether any joint
+/// braked, and whether every joint started at rest (each motion is then monotone,
+/// between its validated start and target: no position check needed).
 pub(crate) fn plan_soft(
     dof: usize,
     start: &JointState,
@@ -41,7 +88,14 @@ pub(crate) fn plan_soft(
     limits: &KinematicLimits,
     min_duration: Option<f64>,
     joints: &mut [Piecewise; MAX_JOINTS],
-) -> (f64, bool) {
+) -> (f64, bool, bool) {
+    if (0..dof).all(|i| start.qd[i] == 0.0 && start.qdd[i] == 0.0) {
+        return (
+            plan_rest(dof, &start.q, target_q, limits, min_duration, joints),
+            false,
+            true,
+        );
+    }
     let mut work = [JointWork::default(); MAX_JOINTS];
     // Each joint's phases; written to `joints` once T is settled.
     let mut plans = [Phases::default(); MAX_JOINTS];
@@ -122,5 +176,5 @@ pub(crate) fn plan_soft(
     for i in 0..dof {
         joints[i].set_phases(k0(i), &plans[i], Some(fin(i)));
     }
-    (t_sync, braked)
+    (t_sync, braked, false)
 }

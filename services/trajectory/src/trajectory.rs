@@ -90,6 +90,8 @@ impl Trajectory {
         let (s, g) = (&req.start, &req.target);
         let joints = &mut self.joints;
         let mut braked = false;
+        // Rest-to-rest soft motions are monotone between validated positions.
+        let mut monotone = false;
         let duration = match req.profile {
             Profile::Cubic { duration: t } => {
                 validate::duration("profile.duration", t)?;
@@ -162,15 +164,19 @@ impl Trajectory {
                 if let Some(t) = min_duration {
                     validate::duration("profile.min_duration", t)?;
                 }
-                let (duration, b) =
+                let (duration, b, rest) =
                     sync::plan_soft(dof, s, &g.q, &req.limits, min_duration, joints);
                 braked = b;
+                monotone = rest;
                 duration
             }
         };
         self.dof = dof;
         self.duration = duration;
         self.braked = braked;
+        if monotone {
+            return Ok(());
+        }
         self.check_positions(&req.limits)
     }
 
@@ -233,27 +239,30 @@ impl Trajectory {
     /// sample found it. Start with zeros; any values are safe.
     #[inline]
     pub fn sample_from(&self, t: f64, hints: &mut [usize; MAX_JOINTS]) -> Sample {
-        let mut out = [[0.0; MAX_JOINTS]; 4];
+        // Written in place (the 256-byte Sample is returned without extra copies).
+        let mut out = Sample::default();
         let n = self.dof.min(MAX_JOINTS);
+        let joints = &self.joints[..n];
+        let (q, qd) = (out.q.as_mut_slice(), out.qd.as_mut_slice());
+        let (qdd, jerk) = (out.qdd.as_mut_slice(), out.jerk.as_mut_slice());
         if t >= self.duration {
             // From the common end on, every joint reports its exact final state.
-            for (i, pw) in self.joints[..n].iter().enumerate() {
+            for (i, pw) in joints.iter().enumerate() {
                 let f = pw.final_state();
-                out[0][i] = f.p;
-                out[1][i] = f.v;
-                out[2][i] = f.a;
+                q[i] = f.p;
+                qd[i] = f.v;
+                qdd[i] = f.a;
             }
         } else {
-            for (i, (pw, hint)) in self.joints[..n].iter().zip(hints.iter_mut()).enumerate() {
-                let [q, qd, qdd, j] = pw.eval_from(t, hint);
-                out[0][i] = q;
-                out[1][i] = qd;
-                out[2][i] = qdd;
-                out[3][i] = j;
+            for (i, (pw, hint)) in joints.iter().zip(hints.iter_mut()).enumerate() {
+                let [a, b, c, d] = pw.eval_from(t, hint);
+                q[i] = a;
+                qd[i] = b;
+                qdd[i] = c;
+                jerk[i] = d;
             }
         }
-        let [q, qd, qdd, jerk] = out.map(JointVector::from);
-        Sample { q, qd, qdd, jerk }
+        out
     }
 
     /// Peak values per joint (computed on demand; not for the hot path).

@@ -35,6 +35,47 @@ fn peak_velocity(d: f64, lim: &Limits1) -> f64 {
     }
 }
 
+/// Peak velocity vp ∈ [d/t, hi] of the stretched profile with jerk-limited ramps
+/// (no amax phase): d = vp·(t − 2√(vp/J)). With s = √vp this is the cubic
+/// (2/√J)·s³ − t·s² + d = 0, whose root below its local minimum s = √J·t/3 is taken in
+/// closed form (trigonometric) and polished by Newton steps; the bracketed search
+/// remains as the fallback.
+fn jerk_limited_peak(d: f64, t: f64, j: f64, hi: f64) -> f64 {
+    let g = |vp: f64| vp * (t - 2.0 * (vp / j).sqrt()) - d;
+    let k = 2.0 / j.sqrt();
+    // Monic: x³ + b·x² + e = 0, b = −t/k, e = d/k; x = y − b/3: y³ + p·y + q = 0.
+    let (b, e) = (-t / k, d / k);
+    let p = -b * b / 3.0;
+    let q = 2.0 * b * b * b / 27.0 + e;
+    let (s_lo, s_hi) = ((d / t).sqrt(), hi.sqrt());
+    if p < 0.0 {
+        let r = (-p / 3.0).sqrt();
+        let c = (-q / (2.0 * r * r * r)).clamp(-1.0, 1.0);
+        let phi = c.acos() / 3.0;
+        // The middle of the three real roots.
+        let mut x = 2.0 * r * (phi - 2.0 * std::f64::consts::FRAC_PI_3).cos() - b / 3.0;
+        for _ in 0..3 {
+            x = x.clamp(s_lo, s_hi);
+            let h = x * x * (k * x - t) + d;
+            let dh = x * (3.0 * k * x - 2.0 * t);
+            if dh >= 0.0 {
+                break;
+            }
+            let step = h / dh;
+            x -= step;
+            if step.abs() <= 1e-15 * x {
+                break;
+            }
+        }
+        let x = x.clamp(s_lo, s_hi);
+        let vp = x * x;
+        if g(vp).abs() <= 1e-13 * d.max(1e-300) {
+            return vp;
+        }
+    }
+    solve(g, d / t, hi)
+}
+
 /// Phases of a symmetric motion: ramp 0 → vp, cruise `tc`, ramp vp → 0.
 fn symmetric(vp: f64, tc: f64, lim: &Limits1) -> Phases {
     let (t1, t2, _) = ramp_from_rest(vp, lim);
@@ -62,6 +103,24 @@ pub fn time_optimal(d: f64, lim: &Limits1) -> Phases {
     }
 }
 
+/// Duration of [`time_optimal`]`(d, lim)`, bit for bit (the same sum in the same
+/// order), without building the phases.
+pub fn time_optimal_duration(d: f64, lim: &Limits1) -> f64 {
+    if d <= 0.0 {
+        return 0.0;
+    }
+    let (_, _, half_v) = ramp_from_rest(lim.v, lim);
+    let (vp, tc) = if d >= 2.0 * half_v {
+        (lim.v, (d - 2.0 * half_v) / lim.v)
+    } else {
+        (peak_velocity(d, lim).min(lim.v), 0.0)
+    };
+    let (t1, t2, _) = ramp_from_rest(vp, lim);
+    let nz = |x: f64| if x > 0.0 { x } else { 0.0 };
+    let (t1, t2, tc) = (nz(t1), nz(t2), nz(tc));
+    t1 + t2 + t1 + tc + t1 + t2 + t1
+}
+
 /// Rest-to-rest phases over `d` ≥ 0 finishing exactly at `t` (≥ the minimum): the
 /// peak velocity vp solves d = vp·(t − T_ramp(vp)).
 pub fn stretched(d: f64, t: f64, lim: &Limits1) -> Phases {
@@ -82,8 +141,7 @@ pub fn stretched(d: f64, t: f64, lim: &Limits1) -> Phases {
     } else {
         // Jerk-limited ramps: d = vp·t − 2·vp^1.5/√J, increasing up to vp = J t²/9.
         let hi = (a * a / j).min(j * t * t / 9.0).min(lim.v);
-        let g = |vp: f64| vp * (t - 2.0 * (vp / j).sqrt()) - d;
-        solve(g, d / t, hi)
+        jerk_limited_peak(d, t, j, hi)
     };
     let vp = vp.min(lim.v);
     let (t1, t2, _) = ramp_from_rest(vp, lim);
