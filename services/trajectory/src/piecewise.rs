@@ -132,6 +132,40 @@ impl Piecewise {
         self.fin = fin.unwrap_or(s);
     }
 
+    /// [`Piecewise::set_phases`] for several joints at once, phase by phase across
+    /// the joints: the joints' integration chains are independent, so they overlap
+    /// instead of running one long serial chain per joint.
+    pub fn set_phases_many(out: &mut [Piecewise], start: &[Kin], phases: &[Phases], fin: &[Kin]) {
+        let m = out.len().min(start.len()).min(phases.len()).min(fin.len());
+        let (out, start, phases, fin) = (&mut out[..m], &start[..m], &phases[..m], &fin[..m]);
+        let mut s = [Kin::default(); 8];
+        let mut t = [0.0; 8];
+        let mut n_max = 0;
+        for (i, pw) in out.iter_mut().enumerate().take(8) {
+            s[i] = start[i];
+            pw.n = phases[i].n;
+            pw.end = [f64::INFINITY; MAX_PHASES];
+            pw.c45 = [0.0; 2];
+            pw.fin = fin[i];
+            n_max = n_max.max(phases[i].n);
+        }
+        let m = m.min(8);
+        for k in 0..n_max {
+            for i in 0..m {
+                let ph = &phases[i];
+                if k < ph.n {
+                    let p = ph.p[k];
+                    let pw = &mut out[i];
+                    t[i] += p.t;
+                    pw.end[k] = t[i];
+                    let si = s[i];
+                    pw.c[k] = [si.p, si.v, 0.5 * si.a, p.j / 6.0];
+                    s[i] = si.advance(p.t, p.j);
+                }
+            }
+        }
+    }
+
     /// A single polynomial piece (degree ≤ 5) of length `t` ending in `fin`.
     pub fn polynomial(t: f64, c: [f64; 6], fin: Kin) -> Self {
         let mut out = Self::hold(fin.p);

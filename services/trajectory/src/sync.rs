@@ -41,6 +41,9 @@ fn plan_rest(
         t_sync = t_sync.max(t_opt[i]);
     }
     let eps = 1e-12 * t_sync.max(1.0);
+    let mut plans = [Phases::default(); MAX_JOINTS];
+    let mut starts = [Kin::default(); MAX_JOINTS];
+    let mut fins = [Kin::default(); MAX_JOINTS];
     for i in 0..dof {
         let lim = limits1(limits, i);
         let d = target_q[i] - q0[i];
@@ -54,18 +57,24 @@ fn plan_rest(
                 p.j = -p.j;
             }
         }
-        let start = Kin {
+        plans[i] = ph;
+        starts[i] = Kin {
             p: q0[i],
             v: 0.0,
             a: 0.0,
         };
-        let fin = Kin {
+        fins[i] = Kin {
             p: target_q[i],
             v: 0.0,
             a: 0.0,
         };
-        joints[i].set_phases(start, &ph, Some(fin));
     }
+    Piecewise::set_phases_many(
+        &mut joints[..dof],
+        &starts[..dof],
+        &plans[..dof],
+        &fins[..dof],
+    );
     t_sync
 }
 
@@ -173,8 +182,13 @@ pub(crate) fn plan_soft(
         }
         t_sync = raise;
     }
-    for i in 0..dof {
-        joints[i].set_phases(k0(i), &plans[i], Some(fin(i)));
-    }
+    let starts: [Kin; MAX_JOINTS] = std::array::from_fn(k0);
+    let fins: [Kin; MAX_JOINTS] = std::array::from_fn(fin);
+    Piecewise::set_phases_many(
+        &mut joints[..dof],
+        &starts[..dof],
+        &plans[..dof],
+        &fins[..dof],
+    );
     (t_sync, braked, false)
 }

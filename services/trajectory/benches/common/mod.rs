@@ -75,4 +75,3 @@ pub fn random_from_state(n: usize) -> Vec<MotionRequest> {
     }
     out
 }
-

@@ -148,3 +148,30 @@ pub fn stretched(d: f64, t: f64, lim: &Limits1) -> Phases {
     // The cruise fills the remaining time exactly, so every joint ends at `t`.
     symmetric(vp, (t - 2.0 * (2.0 * t1 + t2)).max(0.0), lim)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The closed-form jerk-limited peak velocity equals the bracketed root.
+    #[test]
+    fn jerk_limited_peak_matches_root_search() {
+        let j = 2.7;
+        for k in 1..200 {
+            let d = 1e-4 * k as f64 * k as f64;
+            // Minimum duration (jerk-limited, no amax): 4·(d/(2J))^(1/3).
+            let t_min = 4.0 * (d / (2.0 * j)).cbrt();
+            for s in [1.0, 1.0 + 1e-9, 1.001, 1.1, 1.5, 3.0, 10.0] {
+                let t = t_min * s;
+                let hi = j * t * t / 9.0;
+                let g = |vp: f64| vp * (t - 2.0 * (vp / j).sqrt()) - d;
+                let want = solve(g, d / t, hi);
+                let got = jerk_limited_peak(d, t, j, hi);
+                assert!(
+                    (got - want).abs() <= 1e-9 * want,
+                    "d {d} t {t}: {got} vs {want}"
+                );
+            }
+        }
+    }
+}
