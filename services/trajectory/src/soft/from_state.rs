@@ -10,7 +10,7 @@
 //! family with the VEL/ACC0/ACC1 variants, for rest targets.
 
 use super::velocity::{ramp, velocity_change};
-use super::{Kin, Limits1, Phases, solve_tol, stop_velocity};
+use super::{Kin, Limits1, Phases, solve_known, stop_velocity};
 
 /// The push duration after which the stop velocity reaches vmax (positive frame).
 pub fn tau_max(v0: f64, a0: f64, lim: &Limits1) -> f64 {
@@ -89,20 +89,17 @@ pub fn time_optimal(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
 /// towards +) at which its acceleration crosses zero, when it does: the anchor of
 /// the stretch family ([`super::stretch::Stretch::with_anchor`]).
 pub fn time_optimal_peak(v0: f64, a0: f64, d: f64, lim: &Limits1) -> (Phases, Option<f64>) {
-    let sg = if d >= brake_point(v0, a0, lim) {
-        1.0
-    } else {
-        -1.0
-    };
-    let (mut ph, peak) = positive(sg * v0, sg * a0, sg * d, lim);
+    let pb = brake_point(v0, a0, lim);
+    let sg = if d >= pb { 1.0 } else { -1.0 };
+    let (mut ph, peak) = positive(sg * v0, sg * a0, sg * d, sg * pb, lim);
     for p in &mut ph.p[..ph.n] {
         p.j *= sg;
     }
     (ph, peak)
 }
 
-/// Positive-frame solution (d ≥ brake point).
-fn positive(v0: f64, a0: f64, d: f64, lim: &Limits1) -> (Phases, Option<f64>) {
+/// Positive-frame solution (d ≥ brake point `pb`, which is the end of τ = 0).
+fn positive(v0: f64, a0: f64, d: f64, pb: f64, lim: &Limits1) -> (Phases, Option<f64>) {
     let tmax = tau_max(v0, a0, lim);
     let p_max = push_then_stop_end(v0, a0, tmax, lim);
     if d >= p_max {
@@ -120,10 +117,10 @@ fn positive(v0: f64, a0: f64, d: f64, lim: &Limits1) -> (Phases, Option<f64>) {
         ph.extend(&stop);
         (ph, Some(lim.v))
     } else {
-        let tau = solve_tol(
+        let tau = solve_known(
             |t| push_then_stop_end(v0, a0, t, lim) - d,
-            0.0,
-            tmax,
+            (0.0, pb - d),
+            (tmax, p_max - d),
             1e-15 * (1.0 + d.abs()),
         );
         let k = push(a0, tau, lim).integrate(Kin {

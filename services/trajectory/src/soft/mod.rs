@@ -51,9 +51,19 @@ pub(crate) fn solve(f: impl FnMut(f64) -> f64, lo: f64, hi: f64) -> f64 {
 }
 
 /// [`solve`], also stopping once |f| ≤ `ftol`.
-pub(crate) fn solve_tol(mut f: impl FnMut(f64) -> f64, mut lo: f64, mut hi: f64, ftol: f64) -> f64 {
-    let mut flo = f(lo);
-    let mut fhi = f(hi);
+pub(crate) fn solve_tol(mut f: impl FnMut(f64) -> f64, lo: f64, hi: f64, ftol: f64) -> f64 {
+    let (flo, fhi) = (f(lo), f(hi));
+    solve_known(f, (lo, flo), (hi, fhi), ftol)
+}
+
+/// [`solve_tol`] given f at both ends of the bracket (saves two evaluations when
+/// the caller has them already).
+pub(crate) fn solve_known(
+    mut f: impl FnMut(f64) -> f64,
+    (mut lo, mut flo): (f64, f64),
+    (mut hi, mut fhi): (f64, f64),
+    ftol: f64,
+) -> f64 {
     if flo == 0.0 {
         return lo;
     }

@@ -13,7 +13,7 @@
 
 use super::from_state::brake_point;
 use super::velocity::{ramp, ramp_from_rest, velocity_change};
-use super::{Kin, Limits1, Phases, rest_to_rest, solve_tol, stop_velocity};
+use super::{Kin, Limits1, Phases, rest_to_rest, solve_known, solve_tol, stop_velocity};
 
 /// Prepared stretch problem for one joint (positive frame).
 #[derive(Debug, Clone, Copy)]
@@ -41,7 +41,7 @@ impl Stretch {
     /// [`super::from_state::time_optimal_peak`]), which saves a root search.
     pub fn with_anchor(v0: f64, a0: f64, d: f64, lim: &Limits1, anchor: Option<f64>) -> Self {
         if v0 == 0.0 && a0 == 0.0 {
-            let t_r2r = rest_to_rest::time_optimal(d.abs(), lim).duration();
+            let t_r2r = rest_to_rest::time_optimal_duration(d.abs(), lim);
             return Self {
                 sg: if d >= 0.0 { 1.0 } else { -1.0 },
                 v0,
@@ -76,7 +76,7 @@ impl Stretch {
             d: dd,
             vp_hi,
             t_stop: ramp(v, a, 0.0, lim).duration(),
-            t_r2r: rest_to_rest::time_optimal((d - pb).abs(), lim).duration(),
+            t_r2r: rest_to_rest::time_optimal_duration((d - pb).abs(), lim),
             rest: false,
         }
     }
@@ -134,7 +134,7 @@ impl Stretch {
             let m = stop_velocity(self.v0, self.a0, lim.j).clamp(0.0, u);
             let (fm, ok_m) = self.f(m, t, lim);
             if ok_m && fm <= 0.0 {
-                bracket = Some((m, u));
+                bracket = Some(((m, fm), (u, fu)));
             }
         }
         if bracket.is_none() {
@@ -151,14 +151,14 @@ impl Stretch {
                     && fp >= 0.0
                     && fx <= 0.0
                 {
-                    bracket = Some((x, xp));
+                    bracket = Some(((x, fx), (xp, fp)));
                     break;
                 }
                 prev = Some((x, fx));
             }
         }
         let (lo, hi) = bracket?;
-        let vp = solve_tol(
+        let vp = solve_known(
             |vp| {
                 let (fx, ok) = self.f(vp, t, lim);
                 if ok { fx } else { -1.0 - self.d.abs() }
