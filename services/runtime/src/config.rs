@@ -259,7 +259,7 @@ impl Default for PipelineConfig {
                     sensor_noise_rad: 0.0,
                     sensor_noise_rad_s: 0.0,
                     integrator: Integrator::Rk4,
-                    substeps: 2,
+                    substeps: 1,
                     seed: 1,
                     initial_q_deg: None,
                 },
