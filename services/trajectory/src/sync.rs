@@ -9,7 +9,7 @@
 
 use crate::piecewise::{Kin, Phases, Piecewise};
 use crate::soft::stretch::Stretch;
-use crate::soft::{Illinois, Limits1, brake::brake, from_state, rest_to_rest, solve_many};
+use crate::soft::{Limits1, brake::brake, from_state, rest_to_rest};
 use crate::{JointState, KinematicLimits, MAX_JOINTS};
 
 #[derive(Clone, Copy, Default)]
@@ -120,50 +120,26 @@ pub(crate) fn plan_soft(
         v: 0.0,
         a: 0.0,
     };
-    // The time-optimal motions: brake pre-phases and closed forms first, then every
-    // moving joint's push-duration search in lockstep (their chains overlap).
-    let lims: [Limits1; MAX_JOINTS] = std::array::from_fn(|i| limits1(limits, i));
-    let mut preps: [Option<from_state::Prepared>; MAX_JOINTS] = [None; MAX_JOINTS];
-    let mut searches = [Illinois::done(0.0); MAX_JOINTS];
-    let mut afters = [Kin::default(); MAX_JOINTS];
     for i in 0..dof {
-        let lim = &lims[i];
-        let ph = brake(k0(i), lim);
+        let lim = limits1(limits, i);
+        let mut ph = brake(k0(i), &lim);
         braked |= ph.n > 0;
-        let after = ph.integrate(k0(i));
-        afters[i] = after;
-        plans[i] = ph;
-        if !(after.v == 0.0 && after.a == 0.0) {
-            let p = from_state::Prepared::new(after.v, after.a, target_q[i] - after.p, lim);
-            if !p.cruise {
-                searches[i] = Illinois::new(p.lo, p.hi, p.ftol);
-            }
-            preps[i] = Some(p);
-        }
-    }
-    solve_many(&mut searches[..dof], |k, x| match &preps[k] {
-        Some(p) => p.f(x, &lims[k]),
-        None => 0.0,
-    });
-    for i in 0..dof {
-        let lim = &lims[i];
-        let after = afters[i];
-        let ph = &mut plans[i];
         let t_brake = ph.duration();
+        let after = ph.integrate(k0(i));
         let d = target_q[i] - after.p;
-        let (opt, anchor) = match &preps[i] {
-            None => {
-                let mut r = rest_to_rest::time_optimal(d.abs(), lim);
-                if d < 0.0 {
-                    for p in &mut r.p[..r.n] {
-                        p.j = -p.j;
-                    }
+        let (opt, anchor) = if after.v == 0.0 && after.a == 0.0 {
+            let mut r = rest_to_rest::time_optimal(d.abs(), &lim);
+            if d < 0.0 {
+                for p in &mut r.p[..r.n] {
+                    p.j = -p.j;
                 }
-                (r, None)
             }
-            Some(p) => p.finish(searches[i].result.unwrap_or(0.0), lim),
+            (r, None)
+        } else {
+            from_state::time_optimal_peak(after.v, after.a, d, &lim)
         };
         ph.extend(&opt);
+        plans[i] = ph;
         work[i] = JointWork {
             after,
             t_brake,

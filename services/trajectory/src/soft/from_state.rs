@@ -89,77 +89,20 @@ pub fn time_optimal(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
 /// towards +) at which its acceleration crosses zero, when it does: the anchor of
 /// the stretch family ([`super::stretch::Stretch::with_anchor`]).
 pub fn time_optimal_peak(v0: f64, a0: f64, d: f64, lim: &Limits1) -> (Phases, Option<f64>) {
-    let prep = Prepared::new(v0, a0, d, lim);
-    if prep.cruise {
-        return prep.finish(0.0, lim);
+    let pb = brake_point(v0, a0, lim);
+    let sg = if d >= pb { 1.0 } else { -1.0 };
+    let (mut ph, peak) = positive(sg * v0, sg * a0, sg * d, sg * pb, lim);
+    for p in &mut ph.p[..ph.n] {
+        p.j *= sg;
     }
-    let tau = solve_known(|t| prep.f(t, lim), prep.lo, prep.hi, prep.ftol);
-    prep.finish(tau, lim)
+    (ph, peak)
 }
 
-/// A time-optimal problem split around its one root search (the push duration τ),
-/// so that several joints' searches can run in lockstep ([`super::solve_many`]).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Prepared {
-    sg: f64,
-    v0: f64,
-    a0: f64,
-    d: f64,
-    /// Bracket ends (τ, f(τ)).
-    pub lo: (f64, f64),
-    pub hi: (f64, f64),
-    pub ftol: f64,
-    /// The target is past the push that reaches vmax: cruise, no search.
-    pub cruise: bool,
-}
-
-impl Prepared {
-    /// Sign frame, bracket [0, τmax] and its end values.
-    pub fn new(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Self {
-        let pb = brake_point(v0, a0, lim);
-        let sg = if d >= pb { 1.0 } else { -1.0 };
-        let (v0, a0, d, pb) = (sg * v0, sg * a0, sg * d, sg * pb);
-        let tmax = tau_max(v0, a0, lim);
-        let p_max = push_then_stop_end(v0, a0, tmax, lim);
-        Self {
-            sg,
-            v0,
-            a0,
-            d,
-            lo: (0.0, pb - d),
-            hi: (tmax, p_max - d),
-            ftol: 1e-15 * (1.0 + d.abs()),
-            cruise: d >= p_max,
-        }
-    }
-
-    /// End position of "push τ, stop" minus the target (positive frame).
-    #[inline]
-    pub fn f(&self, tau: f64, lim: &Limits1) -> f64 {
-        push_then_stop_end(self.v0, self.a0, tau, lim) - self.d
-    }
-
-    /// Phases (original frame) and the anchor peak velocity, given the root τ (not
-    /// used when `cruise`).
-    pub fn finish(&self, tau: f64, lim: &Limits1) -> (Phases, Option<f64>) {
-        let (mut ph, peak) = positive(self.v0, self.a0, self.d, self.cruise, tau, lim);
-        for p in &mut ph.p[..ph.n] {
-            p.j *= self.sg;
-        }
-        (ph, peak)
-    }
-}
-
-/// Positive-frame solution (d ≥ brake point) given the push duration τ.
-fn positive(
-    v0: f64,
-    a0: f64,
-    d: f64,
-    cruise: bool,
-    tau: f64,
-    lim: &Limits1,
-) -> (Phases, Option<f64>) {
-    if cruise {
+/// Positive-frame solution (d ≥ brake point `pb`, which is the end of τ = 0).
+fn positive(v0: f64, a0: f64, d: f64, pb: f64, lim: &Limits1) -> (Phases, Option<f64>) {
+    let tmax = tau_max(v0, a0, lim);
+    let p_max = push_then_stop_end(v0, a0, tmax, lim);
+    if d >= p_max {
         // Reach vmax, cruise, stop.
         let start = Kin {
             p: 0.0,
@@ -174,6 +117,12 @@ fn positive(
         ph.extend(&stop);
         (ph, Some(lim.v))
     } else {
+        let tau = solve_known(
+            |t| push_then_stop_end(v0, a0, t, lim) - d,
+            (0.0, pb - d),
+            (tmax, p_max - d),
+            1e-15 * (1.0 + d.abs()),
+        );
         let k = push(a0, tau, lim).integrate(Kin {
             p: 0.0,
             v: v0,

@@ -60,156 +60,57 @@ pub(crate) fn solve_tol(mut f: impl FnMut(f64) -> f64, lo: f64, hi: f64, ftol: f
 /// the caller has them already).
 pub(crate) fn solve_known(
     mut f: impl FnMut(f64) -> f64,
-    lo: (f64, f64),
-    hi: (f64, f64),
+    (mut lo, mut flo): (f64, f64),
+    (mut hi, mut fhi): (f64, f64),
     ftol: f64,
 ) -> f64 {
-    let mut s = Illinois::new(lo, hi, ftol);
-    loop {
-        if let Some(x) = s.result {
-            return x;
-        }
-        let x = s.propose();
-        s.accept(x, f(x));
+    if flo == 0.0 {
+        return lo;
     }
-}
-
-/// Several independent [`solve_known`] searches in lockstep: each round proposes a
-/// point for every unfinished search, then evaluates them one after another. The
-/// evaluations do not depend on each other, so the CPU overlaps their long serial
-/// chains (one search alone is latency-bound). Results are bit-identical to
-/// [`solve_known`]; `f(k, x)` evaluates search `k` at `x`.
-pub(crate) fn solve_many(searches: &mut [Illinois], mut f: impl FnMut(usize, f64) -> f64) {
-    const CAP: usize = crate::MAX_JOINTS;
-    let m = searches.len().min(CAP);
-    let searches = &mut searches[..m];
-    loop {
-        let mut xs = [f64::NAN; CAP];
-        let mut any = false;
-        for (k, s) in searches.iter_mut().enumerate() {
-            if s.result.is_none() {
-                xs[k] = s.propose();
-                any = true;
-            }
-        }
-        if !any {
-            return;
-        }
-        let mut fs = [0.0; CAP];
-        for k in 0..m {
-            if !xs[k].is_nan() {
-                fs[k] = f(k, xs[k]);
-            }
-        }
-        for (k, s) in searches.iter_mut().enumerate() {
-            if !xs[k].is_nan() {
-                s.accept(xs[k], fs[k]);
-            }
-        }
+    if fhi == 0.0 {
+        return hi;
     }
-}
-
-/// State of one bracketed root search (Illinois variant of regula falsi with a
-/// bisection whenever three steps failed to halve the bracket — flat stretches and
-/// kinks of piecewise profiles). Converges to machine precision, to |f| ≤ `ftol`, or
-/// stops after 200 steps; `result` is then set.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Illinois {
-    lo: f64,
-    flo: f64,
-    hi: f64,
-    fhi: f64,
-    side: i8,
-    width: f64,
-    it: u32,
-    ftol: f64,
-    /// The root, once the search has finished.
-    pub result: Option<f64>,
-}
-
-impl Illinois {
-    /// A search on [lo.0, hi.0] given f there (lo.1, hi.1).
-    pub fn new((lo, flo): (f64, f64), (hi, fhi): (f64, f64), ftol: f64) -> Self {
-        let result = if flo == 0.0 {
-            Some(lo)
-        } else if fhi == 0.0 {
-            Some(hi)
-        } else if flo.signum() == fhi.signum() {
-            Some(if flo.abs() < fhi.abs() { lo } else { hi })
-        } else {
-            None
-        };
-        Self {
-            lo,
-            flo,
-            hi,
-            fhi,
-            side: 0,
-            width: hi - lo,
-            it: 0,
-            ftol,
-            result,
-        }
+    if flo.signum() == fhi.signum() {
+        return if flo.abs() < fhi.abs() { lo } else { hi };
     }
-
-    /// A finished search with result `x` (nothing left to solve).
-    pub fn done(x: f64) -> Self {
-        let mut s = Self::new((x, 0.0), (x, 0.0), 0.0);
-        s.result = Some(x);
-        s
-    }
-
-    /// The next point to evaluate.
-    #[inline]
-    pub fn propose(&mut self) -> f64 {
-        let (lo, hi) = (self.lo, self.hi);
-        let bisect = self.it % 3 == 2;
-        let mut x = if bisect && hi - lo > 0.5 * self.width {
+    let mut side = 0i8;
+    let mut width = hi - lo;
+    for it in 0..200 {
+        // Illinois steps, with a bisection whenever three of them failed to halve
+        // the bracket (flat stretches and kinks of piecewise profiles).
+        let mut x = if it % 3 == 2 && hi - lo > 0.5 * width {
             0.5 * (lo + hi)
         } else {
-            (lo * self.fhi - hi * self.flo) / (self.fhi - self.flo)
+            (lo * fhi - hi * flo) / (fhi - flo)
         };
-        if bisect {
-            self.width = hi - lo;
+        if it % 3 == 2 {
+            width = hi - lo;
         }
         if !(x > lo && x < hi) {
             x = 0.5 * (lo + hi);
         }
-        x
-    }
-
-    /// Takes f(x) for the point `x` from [`Illinois::propose`].
-    #[inline]
-    pub fn accept(&mut self, x: f64, fx: f64) {
-        self.it += 1;
-        if fx.abs() <= self.ftol {
-            self.result = Some(x);
-            return;
+        let fx = f(x);
+        if fx.abs() <= ftol {
+            return x;
         }
-        if fx.signum() == self.flo.signum() {
-            self.lo = x;
-            self.flo = fx;
-            if self.side == -1 {
-                self.fhi *= 0.5;
+        if fx.signum() == flo.signum() {
+            lo = x;
+            flo = fx;
+            if side == -1 {
+                fhi *= 0.5;
             }
-            self.side = -1;
+            side = -1;
         } else {
-            self.hi = x;
-            self.fhi = fx;
-            if self.side == 1 {
-                self.flo *= 0.5;
+            hi = x;
+            fhi = fx;
+            if side == 1 {
+                flo *= 0.5;
             }
-            self.side = 1;
+            side = 1;
         }
-        let (lo, hi) = (self.lo, self.hi);
-        if hi - lo <= 4.0 * f64::EPSILON * hi.abs().max(lo.abs()).max(f64::MIN_POSITIVE)
-            || self.it >= 200
-        {
-            self.result = Some(if self.flo.abs() < self.fhi.abs() {
-                lo
-            } else {
-                hi
-            });
+        if hi - lo <= 4.0 * f64::EPSILON * hi.abs().max(lo.abs()).max(f64::MIN_POSITIVE) {
+            break;
         }
     }
+    if flo.abs() < fhi.abs() { lo } else { hi }
 }
