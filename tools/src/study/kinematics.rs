@@ -122,25 +122,52 @@ pub fn reference_rank(robot: &Robot) -> usize {
     rank(&jac, robot.dof(), TaskRows::Full)
 }
 
-/// max |∂p_axis/∂q_j| over `count` random configurations inside the limits and the
+/// Largest rank of the full Jacobian over `count` random configurations inside the
+/// limits (a rank-deficient arm, e.g. with two collinear axes, stays below 6).
+pub fn max_rank(robot: &Robot, count: usize) -> usize {
+    let mut data = ModelData::new(robot);
+    let mut rng = Rng(0x2545_f491_4f6c_dd1d);
+    (0..count)
+        .map(|_| {
+            let q = rng.configuration(robot);
+            rank(&jacobian(robot, &mut data, &q), robot.dof(), TaskRows::Full)
+        })
+        .max()
+        .unwrap_or(0)
+}
+
+/// A small xorshift generator for reproducible random configurations.
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn configuration(&mut self, robot: &Robot) -> JointVector {
+        let (lo, hi) = robot.position_limits();
+        let mut q = JointVector::zeros();
+        for i in 0..robot.dof() {
+            q[i] = lo[i] + self.uniform() * (hi[i] - lo[i]);
+        }
+        q
+    }
+}
+
+/// max |∂p_axis/∂q_j| over 2000 random configurations inside the limits and the
 /// sweep of joint `j` (m/rad): zero when joint `j` never moves the tool along `axis`.
 pub fn max_jacobian_element(robot: &Robot, sweeps: &[Sweep], j: usize, axis: usize) -> f64 {
     let mut m = sweeps
         .get(j)
         .map(|s| s.dp.iter().fold(0.0f64, |m, d| m.max(d[axis].abs())))
         .unwrap_or(0.0);
-    let (lo, hi) = robot.position_limits();
     let mut data = ModelData::new(robot);
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     for _ in 0..2000 {
-        let mut q = JointVector::zeros();
-        for i in 0..robot.dof() {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            let u = (state >> 11) as f64 / (1u64 << 53) as f64;
-            q[i] = lo[i] + u * (hi[i] - lo[i]);
-        }
+        let q = rng.configuration(robot);
         let jac = jacobian(robot, &mut data, &q);
         m = m.max(jac[(axis, j)].abs());
     }

@@ -100,6 +100,8 @@ pub struct Study {
     pub sweeps: Vec<kinematics::Sweep>,
     /// Rank of the Jacobian at the reference configuration.
     pub rank: usize,
+    /// Largest rank over random configurations.
+    pub max_rank: usize,
     /// Time-optimal soft-motion duration of each joint alone (s).
     pub soft_alone: Vec<f64>,
     /// Synchronised time-optimal soft-motion duration (s).
@@ -234,6 +236,7 @@ pub fn run(args: StudyArgs) -> Result<Study> {
     pb.finish_and_clear();
     let sweeps = kinematics::sweeps(&robot);
     let rank = kinematics::reference_rank(&robot);
+    let max_rank = kinematics::max_rank(&robot, 2000);
     timings.push((
         "workspace and Jacobian".to_string(),
         t.elapsed().as_secs_f64(),
@@ -304,6 +307,7 @@ pub fn run(args: StudyArgs) -> Result<Study> {
         workspace,
         sweeps,
         rank,
+        max_rank,
         soft_alone,
         soft_sync,
         cases,

@@ -26,17 +26,46 @@ pub struct Verdict {
 
 const RAD2DEG: f64 = 180.0 / std::f64::consts::PI;
 
-fn joint_with<F: Fn(f64, f64) -> bool>(cases: &[Case], dof: usize, better: F) -> (usize, f64) {
-    let mut best = (0, f64::NAN);
-    for i in 0..dof {
-        let v = cases
-            .iter()
-            .fold(0.0f64, |m, c| m.max(c.stats.peak_torque[i]));
-        if best.1.is_nan() || better(v, best.1) {
-            best = (i, v);
-        }
+/// Peak |τ| of each joint over all cases.
+fn joint_peaks(cases: &[Case], dof: usize) -> Vec<f64> {
+    (0..dof)
+        .map(|i| {
+            cases
+                .iter()
+                .fold(0.0f64, |m, c| m.max(c.stats.peak_torque[i]))
+        })
+        .collect()
+}
+
+/// Joints whose value equals the extreme (`highest` or lowest) within 1e-9
+/// relative: ties are reported, not broken by index.
+fn extreme_joints(peaks: &[f64], highest: bool) -> (Vec<usize>, f64) {
+    let ext = if highest {
+        peaks.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+    } else {
+        peaks.iter().copied().fold(f64::INFINITY, f64::min)
+    };
+    let tol = 1e-9 * ext.abs().max(1e-12);
+    let set = (0..peaks.len())
+        .filter(|&i| (peaks[i] - ext).abs() <= tol)
+        .collect();
+    (set, ext)
+}
+
+fn joint_list(set: &[usize]) -> String {
+    let names: Vec<String> = set.iter().map(|i| format!("{}", i + 1)).collect();
+    match names.len() {
+        1 => format!("Joint {}", names[0]),
+        _ => format!("Joints {} (tied)", names.join(" and ")),
     }
-    best
+}
+
+/// 1-based joint numbers, comma separated.
+fn joined(set: &[usize]) -> String {
+    set.iter()
+        .map(|i| (i + 1).to_string())
+        .collect::<Vec<_>>()
+        .join(",")
 }
 
 fn dominant(c: &Case) -> usize {
@@ -64,12 +93,16 @@ pub fn compute(
         .fold(f64::NEG_INFINITY, f64::max);
 
     // 1. Highest torque at joint 1.
-    let (hi_j, hi_v) = joint_with(cases, dof, |a, b| a > b);
+    let peaks = joint_peaks(cases, dof);
+    let (hi_set, hi_v) = extreme_joints(&peaks, true);
     let wins: Vec<String> = (0..dof)
         .map(|i| {
             let n = cases
                 .iter()
-                .filter(|c| (0..dof).all(|k| c.stats.peak_torque[i] >= c.stats.peak_torque[k]))
+                .filter(|c| {
+                    (0..dof)
+                        .all(|k| c.stats.peak_torque[i] >= c.stats.peak_torque[k] * (1.0 - 1e-9))
+                })
                 .count();
             format!("j{}: {n}", i + 1)
         })
@@ -79,8 +112,8 @@ pub fn compute(
         id: "highest_torque_joint",
         claim: "The highest hub torque is at joint 1 (sections 5.2.1-5.2.4, 5.3, 6).".into(),
         finding: format!(
-            "Joint {} carries the highest peak torque, {:.3} N·m over all {} cases (cases in which each joint is highest: {}). Gravity is ({:.2}, {:.2}, {:.2}) m/s² in the base frame.",
-            hi_j + 1,
+            "{} carries the highest peak torque, {:.3} N·m over all {} cases (cases in which each joint is highest, ties counted for each: {}). Gravity is ({:.2}, {:.2}, {:.2}) m/s² in the base frame.",
+            joint_list(&hi_set),
             hi_v,
             cases.len(),
             wins.join(", "),
@@ -88,22 +121,22 @@ pub fn compute(
             grav.y,
             grav.z
         ),
-        holds: hi_j == 0,
-        value: format!("{}", hi_j + 1),
+        holds: hi_set.contains(&0),
+        value: joined(&hi_set),
     });
 
     // 2. Lowest torque at joint 6 (the last joint).
-    let (lo_j, lo_v) = joint_with(cases, dof, |a, b| a < b);
+    let (lo_set, lo_v) = extreme_joints(&peaks, false);
     out.push(Verdict {
         id: "lowest_torque_joint",
         claim: format!("The actuator torque of joint {dof} is the lowest (sections 5.2, 5.3, 6)."),
         finding: format!(
-            "Joint {} has the lowest peak torque, {:.3} N·m over all cases.",
-            lo_j + 1,
+            "{} has the lowest peak torque, {:.3} N·m over all cases.",
+            joint_list(&lo_set),
             lo_v
         ),
-        holds: lo_j + 1 == dof,
-        value: format!("{}", lo_j + 1),
+        holds: lo_set.contains(&(dof - 1)),
+        value: joined(&lo_set),
     });
 
     // 3. Peak torque grows with the final time.
@@ -279,13 +312,21 @@ pub fn compute(
     // 9. The quintic at the longest tf goes back and forth.
     if let Some(c) = case(Method::Quintic, t_long) {
         let rev = c.stats.reversals.first().copied().unwrap_or(0);
+        // Joint 1's turning points: where its sampled velocity changes sign.
+        let turns: Vec<String> =
+            c.qd.windows(2)
+                .zip(c.q.iter().skip(1))
+                .filter(|(w, _)| w[0][0] * w[1][0] < 0.0)
+                .map(|(_, q)| format!("{:.1}°", q[0] * RAD2DEG))
+                .collect();
         out.push(Verdict {
             id: "quintic_long_time_reverses",
             claim: format!(
                 "With the quintic at tf = {t_long} s joint 1 does not move monotonically: it rises to 40°, falls to −40°, then reaches θf (section 5.2.2)."
             ),
             finding: format!(
-                "Joint 1's velocity changes sign {rev} times; its position spans [{:.2}°, {:.2}°] (θi = {:.2}°, θf = {:.2}°).",
+                "Joint 1's velocity changes sign {rev} times (turning at {}); its position spans [{:.2}°, {:.2}°] (θi = {:.2}°, θf = {:.2}°).",
+                if turns.is_empty() { "no point".to_string() } else { turns.join(", ") },
                 c.peaks.position_min[0] * RAD2DEG,
                 c.peaks.position_max[0] * RAD2DEG,
                 motion.start[0] * RAD2DEG,
