@@ -170,12 +170,10 @@ pub fn main(args: TopArgs) -> anyhow::Result<()> {
         args.timeout,
         args.instance
     );
-    // Two statuses per service give a rate (~10 Hz status period).
-    let _ = monitor.wait_for(Duration::from_millis(400), |m| {
-        m.latest
-            .iter()
-            .zip(&m.previous)
-            .all(|(l, p)| l.is_none() || p.is_some())
+    // Every service reports at ~10 Hz: within a second all three are seen, twice
+    // each (two statuses give a rate). A missing one shows as absent.
+    let _ = monitor.wait_for(Duration::from_millis(1500), |m| {
+        m.latest.iter().all(Option::is_some) && m.previous.iter().all(Option::is_some)
     })?;
     let clear = !args.json && !args.once && std::io::stdout().is_terminal();
     loop {
