@@ -2,6 +2,7 @@
 
 pub mod eval_model;
 pub mod eval_trajectory;
+pub mod recording;
 pub mod run;
 pub mod send;
 pub mod service;

@@ -8,10 +8,15 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use microrobot_cli::recording::{export, plot, record, replay};
 use microrobot_cli::{eval_model, eval_trajectory, run, send, service, study, top};
 
 #[derive(Parser)]
-#[command(name = "microrobot", version, about = "Real-time motion stack for a 6-DOF surgical arm")]
+#[command(
+    name = "microrobot",
+    version,
+    about = "Real-time motion stack for a 6-DOF surgical arm"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -27,6 +32,14 @@ enum Command {
     Top(top::TopArgs),
     /// Regenerate the seed's study (tables, workspace, Jacobian, trajectories, torques, verdicts).
     Study(study::StudyArgs),
+    /// Record every stream of a running pipeline to an MCAP file (JSON, Foxglove-ready).
+    Record(record::RecordArgs),
+    /// Write one CSV per topic of a recording.
+    Export(export::ExportArgs),
+    /// Draw torque, tracking error and latency of a recording as PNGs.
+    Plot(plot::PlotArgs),
+    /// Recompute a recording's torques with the dynamics law and check they are bit-identical.
+    Replay(replay::ReplayArgs),
     /// Evaluate a model or a trajectory: JSON lines in on stdin, JSON lines out on stdout.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -57,6 +70,10 @@ fn main() -> ExitCode {
         Command::Send(args) => send::main(args),
         Command::Top(args) => top::main(args),
         Command::Study(args) => study::main(args),
+        Command::Record(args) => record::main(args),
+        Command::Export(args) => export::main(args),
+        Command::Plot(args) => plot::main(args),
+        Command::Replay(args) => replay::main(args),
         Command::Service(args) => return service::main(args),
         Command::Eval(EvalCommand::Model { robot, method }) => eval_model::run(&robot, method),
         Command::Eval(EvalCommand::Trajectory) => eval_trajectory::run(),

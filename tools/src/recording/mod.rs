@@ -1,0 +1,392 @@
+//! Recordings of a pipeline's bus in MCAP: `microrobot record` writes them, `export`,
+//! `plot` and `replay` read them.
+//!
+//! File layout: one channel per stream (`setpoint`, `torque`, `state`, `command`,
+//! `status`), message encoding `json`, schema encoding `jsonschema` (what Foxglove
+//! decodes and plots). Each message is one JSON object with the payload's field names;
+//! arrays of the cyclic streams hold the `dof` active joints only, the status arrays all
+//! [`MAX_JOINTS`]. Floats are printed shortest-round-trip (they parse back bit for bit).
+//! `log_time` and `publish_time` are the message's own `CLOCK_MONOTONIC` stamp
+//! (`header.stamp_ns`, `stamp_ns`), in ns. The resolved pipeline config, when the
+//! recorder found it, is attached as `pipeline.resolved.toml`.
+
+pub mod export;
+pub mod plot;
+pub mod record;
+pub mod replay;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{Context as _, Result, anyhow, bail};
+use microrobot_messages::{
+    Header, JointSetpoint, JointState, LatencySummary, MAX_JOINTS, MotionCommand, ServiceStatus,
+    TorqueCommand,
+};
+use serde_json::{Map, Value, json};
+
+/// Name of the attachment holding the pipeline config the recorded run used.
+pub const CONFIG_ATTACHMENT: &str = "pipeline.resolved.toml";
+
+/// The recorded streams, in pipeline order (also the MCAP topic names).
+pub const TOPICS: [&str; 5] = ["setpoint", "torque", "state", "command", "status"];
+
+fn active(v: &[f64; MAX_JOINTS], dof: u32) -> Value {
+    let n = (dof as usize).min(MAX_JOINTS);
+    Value::from(v[..n].to_vec())
+}
+
+fn header(h: &Header) -> Value {
+    json!({
+        "seq": h.seq,
+        "tick": h.tick,
+        "stamp_ns": h.stamp_ns,
+        "source_stamp_ns": h.source_stamp_ns,
+    })
+}
+
+/// JSON form of a setpoint.
+pub fn setpoint_json(m: &JointSetpoint) -> Value {
+    json!({
+        "header": header(&m.header),
+        "q": active(&m.q, m.dof),
+        "qd": active(&m.qd, m.dof),
+        "qdd": active(&m.qdd, m.dof),
+        "jerk": active(&m.jerk, m.dof),
+        "dof": m.dof,
+        "flags": m.flags,
+    })
+}
+
+/// JSON form of a torque command.
+pub fn torque_json(m: &TorqueCommand) -> Value {
+    json!({
+        "header": header(&m.header),
+        "tau": active(&m.tau, m.dof),
+        "q_desired": active(&m.q_desired, m.dof),
+        "setpoint_seq": m.setpoint_seq,
+        "state_seq": m.state_seq,
+        "dof": m.dof,
+        "flags": m.flags,
+    })
+}
+
+/// JSON form of a measured state.
+pub fn state_json(m: &JointState) -> Value {
+    json!({
+        "header": header(&m.header),
+        "q": active(&m.q, m.dof),
+        "qd": active(&m.qd, m.dof),
+        "tau_applied": active(&m.tau_applied, m.dof),
+        "torque_seq": m.torque_seq,
+        "dof": m.dof,
+        "lifecycle": m.lifecycle,
+        "flags": m.flags,
+        "reserved": m.reserved,
+    })
+}
+
+/// JSON form of a motion command (the whole `target`: it may be a pose).
+pub fn command_json(m: &MotionCommand) -> Value {
+    json!({
+        "seq": m.seq,
+        "stamp_ns": m.stamp_ns,
+        "kind": m.kind,
+        "profile": m.profile,
+        "space": m.space,
+        "dof": m.dof,
+        "target": m.target.to_vec(),
+        "duration_s": m.duration_s,
+        "limit_scale": m.limit_scale,
+    })
+}
+
+fn latency_json(l: &LatencySummary) -> Value {
+    json!({
+        "count": l.count,
+        "p50_ns": l.p50_ns,
+        "p99_ns": l.p99_ns,
+        "p999_ns": l.p999_ns,
+        "p9999_ns": l.p9999_ns,
+        "max_ns": l.max_ns,
+    })
+}
+
+/// JSON form of a service status.
+pub fn status_json(m: &ServiceStatus) -> Value {
+    json!({
+        "seq": m.seq,
+        "stamp_ns": m.stamp_ns,
+        "role": m.role,
+        "lifecycle": m.lifecycle,
+        "pid": m.pid,
+        "ready": m.ready,
+        "cycles": m.cycles,
+        "deadline_misses": m.deadline_misses,
+        "skipped_ticks": m.skipped_ticks,
+        "lost_messages": m.lost_messages,
+        "refused_messages": m.refused_messages,
+        "stale_cycles": m.stale_cycles,
+        "clamped_cycles": m.clamped_cycles,
+        "faults": m.faults,
+        "commands_accepted": m.commands_accepted,
+        "commands_refused": m.commands_refused,
+        "motion_time_s": m.motion_time_s,
+        "program_done": m.program_done,
+        "cpu_time_ms": m.cpu_time_ms,
+        "rss_kib": m.rss_kib,
+        "latency": latency_json(&m.latency),
+        "tracking_error_max": m.tracking_error_max.to_vec(),
+        "peak_torque": m.peak_torque.to_vec(),
+    })
+}
+
+/// JSON Schema of a value shaped like the encoders' output (integers, numbers, arrays of
+/// numbers, nested objects), every property required.
+fn schema_of(v: &Value) -> Value {
+    match v {
+        Value::Object(m) => {
+            let props: Map<String, Value> =
+                m.iter().map(|(k, v)| (k.clone(), schema_of(v))).collect();
+            let required: Vec<&String> = m.keys().collect();
+            json!({ "type": "object", "properties": props, "required": required })
+        }
+        Value::Array(_) => json!({ "type": "array", "items": { "type": "number" } }),
+        Value::Number(n) if n.is_u64() || n.is_i64() => json!({ "type": "integer" }),
+        Value::Number(_) => json!({ "type": "number" }),
+        Value::Bool(_) => json!({ "type": "boolean" }),
+        _ => json!({}),
+    }
+}
+
+/// Schema name (the payload's contract type name) and JSON Schema of `topic`.
+pub fn schema(topic: &str) -> Result<(&'static str, Value)> {
+    let (name, sample) = match topic {
+        "setpoint" => (
+            "microrobot::v1::JointSetpoint",
+            setpoint_json(&JointSetpoint::default()),
+        ),
+        "torque" => (
+            "microrobot::v1::TorqueCommand",
+            torque_json(&TorqueCommand::default()),
+        ),
+        "state" => (
+            "microrobot::v1::JointState",
+            state_json(&JointState::default()),
+        ),
+        "command" => (
+            "microrobot::v1::MotionCommand",
+            command_json(&MotionCommand::default()),
+        ),
+        "status" => (
+            "microrobot::v1::ServiceStatus",
+            status_json(&ServiceStatus::default()),
+        ),
+        other => bail!("unknown topic `{other}`"),
+    };
+    let mut s = schema_of(&sample);
+    if let Value::Object(m) = &mut s {
+        m.insert("title".into(), Value::from(name));
+    }
+    Ok((name, s))
+}
+
+// ---- decoding ----
+
+fn field<'a>(v: &'a Value, key: &str) -> Result<&'a Value> {
+    v.get(key).ok_or_else(|| anyhow!("missing field `{key}`"))
+}
+
+fn u64_of(v: &Value, key: &str) -> Result<u64> {
+    field(v, key)?
+        .as_u64()
+        .ok_or_else(|| anyhow!("field `{key}` is not an unsigned integer"))
+}
+
+fn u32_of(v: &Value, key: &str) -> Result<u32> {
+    u32::try_from(u64_of(v, key)?).map_err(|_| anyhow!("field `{key}` does not fit in u32"))
+}
+
+/// A joint array (null, as serde_json prints a non-finite float, reads as NaN).
+fn joints_of(v: &Value, key: &str) -> Result<[f64; MAX_JOINTS]> {
+    let arr = field(v, key)?
+        .as_array()
+        .ok_or_else(|| anyhow!("field `{key}` is not an array"))?;
+    if arr.len() > MAX_JOINTS {
+        bail!(
+            "field `{key}` has {} entries, at most {MAX_JOINTS}",
+            arr.len()
+        );
+    }
+    let mut out = [0.0; MAX_JOINTS];
+    for (o, x) in out.iter_mut().zip(arr) {
+        *o = match x {
+            Value::Null => f64::NAN,
+            x => x
+                .as_f64()
+                .ok_or_else(|| anyhow!("field `{key}` holds a non-number"))?,
+        };
+    }
+    Ok(out)
+}
+
+fn header_of(v: &Value) -> Result<Header> {
+    let h = field(v, "header")?;
+    Ok(Header {
+        seq: u64_of(h, "seq")?,
+        tick: u64_of(h, "tick")?,
+        stamp_ns: u64_of(h, "stamp_ns")?,
+        source_stamp_ns: u64_of(h, "source_stamp_ns")?,
+    })
+}
+
+/// Parses a recorded setpoint.
+pub fn setpoint_from(v: &Value) -> Result<JointSetpoint> {
+    Ok(JointSetpoint {
+        header: header_of(v)?,
+        q: joints_of(v, "q")?,
+        qd: joints_of(v, "qd")?,
+        qdd: joints_of(v, "qdd")?,
+        jerk: joints_of(v, "jerk")?,
+        dof: u32_of(v, "dof")?,
+        flags: u32_of(v, "flags")?,
+    })
+}
+
+/// Parses a recorded torque command.
+pub fn torque_from(v: &Value) -> Result<TorqueCommand> {
+    Ok(TorqueCommand {
+        header: header_of(v)?,
+        tau: joints_of(v, "tau")?,
+        q_desired: joints_of(v, "q_desired")?,
+        setpoint_seq: u64_of(v, "setpoint_seq")?,
+        state_seq: u64_of(v, "state_seq")?,
+        dof: u32_of(v, "dof")?,
+        flags: u32_of(v, "flags")?,
+    })
+}
+
+/// Parses a recorded measured state.
+pub fn state_from(v: &Value) -> Result<JointState> {
+    Ok(JointState {
+        header: header_of(v)?,
+        q: joints_of(v, "q")?,
+        qd: joints_of(v, "qd")?,
+        tau_applied: joints_of(v, "tau_applied")?,
+        torque_seq: u64_of(v, "torque_seq")?,
+        dof: u32_of(v, "dof")?,
+        lifecycle: u32_of(v, "lifecycle")?,
+        flags: u32_of(v, "flags")?,
+        reserved: u32_of(v, "reserved")?,
+    })
+}
+
+// ---- reading ----
+
+/// One recorded message: its topic's JSON and the MCAP times.
+#[derive(Debug, Clone)]
+pub struct Recorded {
+    pub log_time: u64,
+    pub publish_time: u64,
+    pub value: Value,
+}
+
+/// A recording read back: messages per topic (file order) and the attachments.
+#[derive(Debug, Default)]
+pub struct Recording {
+    pub topics: BTreeMap<String, Vec<Recorded>>,
+    pub attachments: BTreeMap<String, Vec<u8>>,
+}
+
+impl Recording {
+    /// Reads `path`; every message must be JSON on a known channel.
+    pub fn read(path: &Path) -> Result<Self> {
+        let what = || path.display().to_string();
+        let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", what()))?;
+        let mut rec = Recording::default();
+        let stream = mcap::MessageStream::new(&bytes)
+            .with_context(|| format!("{}: not an MCAP file", what()))?;
+        for (i, m) in stream.enumerate() {
+            let m = m.with_context(|| format!("{}: bad MCAP record (message {i})", what()))?;
+            if m.channel.message_encoding != "json" {
+                bail!(
+                    "{}: channel `{}` has message encoding `{}`, expected json",
+                    what(),
+                    m.channel.topic,
+                    m.channel.message_encoding
+                );
+            }
+            let value: Value = serde_json::from_slice(&m.data).with_context(|| {
+                format!(
+                    "{}: message {i} on `{}` is not valid JSON",
+                    what(),
+                    m.channel.topic
+                )
+            })?;
+            rec.topics
+                .entry(m.channel.topic.clone())
+                .or_default()
+                .push(Recorded {
+                    log_time: m.log_time,
+                    publish_time: m.publish_time,
+                    value,
+                });
+        }
+        if let Ok(Some(summary)) = mcap::Summary::read(&bytes) {
+            for idx in &summary.attachment_indexes {
+                if let Ok(a) = mcap::read::attachment(&bytes, idx) {
+                    rec.attachments.insert(a.name.clone(), a.data.into_owned());
+                }
+            }
+        }
+        Ok(rec)
+    }
+
+    /// The messages of `topic` (empty if none were recorded).
+    pub fn messages(&self, topic: &str) -> &[Recorded] {
+        self.topics.get(topic).map_or(&[], Vec::as_slice)
+    }
+
+    /// Parses every message of `topic` with `parse`, naming the file and message on error.
+    pub fn parse<T>(
+        &self,
+        path: &Path,
+        topic: &str,
+        parse: fn(&Value) -> Result<T>,
+    ) -> Result<Vec<T>> {
+        self.messages(topic)
+            .iter()
+            .enumerate()
+            .map(|(i, m)| {
+                parse(&m.value).with_context(|| {
+                    format!("{}: `{topic}` message {i} is malformed", path.display())
+                })
+            })
+            .collect()
+    }
+}
+
+/// Flattens a message into (column, value) pairs: nested objects as `outer.inner`,
+/// arrays as `name_0`, `name_1`, ...
+pub fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, String)>) {
+    match v {
+        Value::Object(m) => {
+            for (k, x) in m {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                flatten(&key, x, out);
+            }
+        }
+        Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                flatten(&format!("{prefix}_{i}"), x, out);
+            }
+        }
+        Value::Null => out.push((prefix.to_string(), String::new())),
+        Value::String(s) => out.push((prefix.to_string(), s.clone())),
+        other => out.push((prefix.to_string(), other.to_string())),
+    }
+}

@@ -1,0 +1,454 @@
+//! `microrobot record`: attaches to a pipeline instance and writes every stream to MCAP.
+//!
+//! The drain thread (this one) sleeps in an iceoryx2 WaitSet on the five event services,
+//! the shutdown eventfd and a 100 ms timerfd; on every wake-up it drains every listener
+//! and then every subscriber, and hands the copied payloads (with their receive time)
+//! to a writer thread over an unbounded channel, so JSON encoding and file I/O never
+//! hold up draining. The writer thread runs at a lower priority (nice +10).
+//!
+//! Ready protocol: once all ports are open (the services are created with the
+//! contract's QoS if the pipeline is not up yet) the recorder creates `--ready-file`
+//! (if given) and prints the line `recording <FILE>` on stdout. Start it before the
+//! pipeline to miss nothing. It stops on SIGINT/SIGTERM, after `--duration`, or with
+//! `--until-finalized` once planner, dynamics and actuator each published their final
+//! status; it then finishes the file (summary, indexes) and prints one JSON line on
+//! stdout: messages and sequence gaps per topic, largest receive lag.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::{BufWriter, Write as _};
+use std::path::PathBuf;
+use std::sync::mpsc;
+
+use anyhow::{Context as _, Result, anyhow, ensure};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use microrobot_messages::{
+    JointSetpoint, JointState, LifecycleState, MotionCommand, ServiceKind, ServiceStatus,
+    TorqueCommand, monotonic_ns, open_event, open_publish_subscribe, service_name,
+};
+use microrobot_runtime::{Shutdown, TimerFd, waitset};
+use serde::Serialize;
+
+use super::{CONFIG_ATTACHMENT, TOPICS};
+
+/// Options of `microrobot record`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RecordArgs {
+    /// Instance name of the pipeline to record.
+    #[arg(long, default_value = "default", value_name = "NAME")]
+    pub instance: String,
+    /// MCAP file to write (replaced if it exists).
+    #[arg(long, value_name = "FILE.mcap")]
+    pub out: PathBuf,
+    /// Stop after this many seconds.
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+    /// Create this file once every subscriber is open (the ready signal for a supervisor).
+    #[arg(long, value_name = "FILE")]
+    pub ready_file: Option<PathBuf>,
+    /// Stop once planner, dynamics and actuator have each published their final status.
+    #[arg(long)]
+    pub until_finalized: bool,
+}
+
+/// What the recorder reports at the end (one JSON line on stdout).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct RecordSummary {
+    pub file: String,
+    pub instance: String,
+    pub duration_s: f64,
+    /// Messages written per topic.
+    pub messages: BTreeMap<String, u64>,
+    /// Messages missing between received ones per topic (sequence gaps, per publisher).
+    pub gaps: BTreeMap<String, u64>,
+    /// Largest receive time − message stamp, µs.
+    pub max_lag_us: f64,
+    /// Whether the resolved pipeline config was attached.
+    pub config_attached: bool,
+}
+
+/// One received payload.
+#[derive(Clone, Copy)]
+enum Payload {
+    Setpoint(JointSetpoint),
+    Torque(TorqueCommand),
+    State(JointState),
+    Command(MotionCommand),
+    Status(ServiceStatus),
+}
+
+impl Payload {
+    fn topic(&self) -> usize {
+        match self {
+            Payload::Setpoint(_) => 0,
+            Payload::Torque(_) => 1,
+            Payload::State(_) => 2,
+            Payload::Command(_) => 3,
+            Payload::Status(_) => 4,
+        }
+    }
+
+    fn seq_and_stamp(&self) -> (u64, u64) {
+        match self {
+            Payload::Setpoint(m) => (m.header.seq, m.header.stamp_ns),
+            Payload::Torque(m) => (m.header.seq, m.header.stamp_ns),
+            Payload::State(m) => (m.header.seq, m.header.stamp_ns),
+            Payload::Command(m) => (m.seq, m.stamp_ns),
+            Payload::Status(m) => (m.seq, m.stamp_ns),
+        }
+    }
+
+    fn json(&self) -> serde_json::Value {
+        match self {
+            Payload::Setpoint(m) => super::setpoint_json(m),
+            Payload::Torque(m) => super::torque_json(m),
+            Payload::State(m) => super::state_json(m),
+            Payload::Command(m) => super::command_json(m),
+            Payload::Status(m) => super::status_json(m),
+        }
+    }
+}
+
+struct Received {
+    payload: Payload,
+    publisher: u128,
+    recv_ns: u64,
+}
+
+fn check_instance(name: &str) -> Result<()> {
+    ensure!(
+        (1..=64).contains(&name.len())
+            && name
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-'),
+        "--instance `{name}`: must be 1 to 64 characters of [A-Za-z0-9_-]"
+    );
+    Ok(())
+}
+
+fn subscriber<T>(
+    node: &Node<ipc::Service>,
+    instance: &str,
+    kind: ServiceKind,
+) -> Result<Subscriber<ipc::Service, T, ()>>
+where
+    T: std::fmt::Debug + ZeroCopySend + 'static,
+{
+    open_publish_subscribe::<T>(node, instance, kind)?
+        .subscriber_builder()
+        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
+        .create()
+        .map_err(|e| anyhow!("{} subscriber: {e:?}", service_name(instance, kind)))
+}
+
+fn listener(
+    node: &Node<ipc::Service>,
+    instance: &str,
+    kind: ServiceKind,
+) -> Result<Listener<ipc::Service>> {
+    open_event(node, instance, kind)?
+        .listener_builder()
+        .create()
+        .map_err(|e| anyhow!("{} listener: {e:?}", service_name(instance, kind)))
+}
+
+/// Takes every waiting sample of `sub`; returns how many.
+fn drain<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
+    sub: &Subscriber<ipc::Service, T, ()>,
+    wrap: fn(T) -> Payload,
+    tx: &mpsc::Sender<Received>,
+    on: &mut impl FnMut(&Payload),
+) -> usize {
+    let mut n = 0;
+    while let Ok(Some(s)) = sub.receive() {
+        let payload = wrap(*s);
+        let publisher = s.header().publisher_id().value();
+        drop(s);
+        on(&payload);
+        // The writer only goes away after this thread is done; a send error cannot happen.
+        let _ = tx.send(Received {
+            payload,
+            publisher,
+            recv_ns: monotonic_ns(),
+        });
+        n += 1;
+    }
+    n
+}
+
+/// Lowers the calling thread's priority (best effort).
+fn nice_this_thread(inc: i32) {
+    // SAFETY: plain syscalls on the calling thread.
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, inc);
+    }
+}
+
+struct Writer {
+    mcap: mcap::Writer<BufWriter<File>>,
+    channels: [u16; 5],
+    sequence: [u32; 5],
+    last_seq: [HashMap<u128, u64>; 5],
+    summary: RecordSummary,
+}
+
+impl Writer {
+    fn create(args: &RecordArgs) -> Result<Self> {
+        let path = &args.out;
+        let file =
+            File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+        let mut mcap = mcap::WriteOptions::new()
+            .compression(None)
+            .profile("")
+            .library(concat!("microrobot ", env!("CARGO_PKG_VERSION")))
+            .create(BufWriter::with_capacity(1 << 20, file))
+            .with_context(|| format!("cannot start MCAP file {}", path.display()))?;
+        let mut channels = [0u16; 5];
+        let mut meta = BTreeMap::new();
+        meta.insert("instance".to_string(), args.instance.clone());
+        for (i, topic) in TOPICS.iter().enumerate() {
+            let (name, schema) = super::schema(topic)?;
+            let schema_id = mcap
+                .add_schema(name, "jsonschema", schema.to_string().as_bytes())
+                .context("MCAP schema")?;
+            channels[i] = mcap
+                .add_channel(schema_id, topic, "json", &meta)
+                .context("MCAP channel")?;
+        }
+        let mut summary = RecordSummary {
+            file: path.display().to_string(),
+            instance: args.instance.clone(),
+            ..Default::default()
+        };
+        for t in TOPICS {
+            summary.messages.insert(t.to_string(), 0);
+            summary.gaps.insert(t.to_string(), 0);
+        }
+        Ok(Self {
+            mcap,
+            channels,
+            sequence: [0; 5],
+            last_seq: Default::default(),
+            summary,
+        })
+    }
+
+    fn write(&mut self, r: &Received) -> Result<()> {
+        let t = r.payload.topic();
+        let (seq, stamp) = r.payload.seq_and_stamp();
+        if let Some(last) = self.last_seq[t].insert(r.publisher, seq)
+            && seq > last + 1
+        {
+            *self.summary.gaps.entry(TOPICS[t].into()).or_default() += seq - last - 1;
+        }
+        let lag_us = r.recv_ns.saturating_sub(stamp) as f64 / 1000.0;
+        self.summary.max_lag_us = self.summary.max_lag_us.max(lag_us);
+        let data = serde_json::to_vec(&r.payload.json()).context("JSON encoding")?;
+        self.sequence[t] = self.sequence[t].wrapping_add(1);
+        self.mcap
+            .write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: self.channels[t],
+                    sequence: self.sequence[t],
+                    log_time: stamp,
+                    publish_time: stamp,
+                },
+                &data,
+            )
+            .with_context(|| format!("cannot write to {}", self.summary.file))?;
+        *self.summary.messages.entry(TOPICS[t].into()).or_default() += 1;
+        Ok(())
+    }
+
+    fn finish(mut self, instance: &str) -> Result<RecordSummary> {
+        let cfg = crate::supervisor::instance::state_dir()
+            .join(instance)
+            .join(CONFIG_ATTACHMENT);
+        if let Ok(data) = std::fs::read(&cfg) {
+            let now = monotonic_ns();
+            self.mcap
+                .attach(&mcap::Attachment {
+                    log_time: now,
+                    create_time: now,
+                    name: CONFIG_ATTACHMENT.to_string(),
+                    media_type: "application/toml".to_string(),
+                    data: data.into(),
+                })
+                .with_context(|| format!("cannot write to {}", self.summary.file))?;
+            self.summary.config_attached = true;
+        }
+        self.mcap
+            .finish()
+            .with_context(|| format!("cannot finish {}", self.summary.file))?;
+        let mut inner = self.mcap.into_inner();
+        inner
+            .flush()
+            .with_context(|| format!("cannot write {}", self.summary.file))?;
+        Ok(self.summary)
+    }
+}
+
+/// Records until stopped; see the module documentation for the protocol.
+pub fn main(args: RecordArgs) -> Result<()> {
+    check_instance(&args.instance)?;
+    if let Some(d) = args.duration {
+        ensure!(
+            d.is_finite() && d > 0.0,
+            "--duration {d}: must be a positive number of seconds"
+        );
+    }
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    let shutdown = Shutdown::new().context("cannot create the shutdown eventfd")?;
+    shutdown
+        .install_signal_handler()
+        .context("cannot install the SIGINT/SIGTERM handler")?;
+
+    let inst = args.instance.as_str();
+    let node_name = format!("microrobot-record.{inst}.{}", std::process::id());
+    let node = NodeBuilder::new()
+        .name(
+            &node_name
+                .as_str()
+                .try_into()
+                .map_err(|e| anyhow!("invalid node name `{node_name}`: {e:?}"))?,
+        )
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(|e| anyhow!("cannot create iceoryx2 node `{node_name}`: {e:?}"))?;
+
+    let writer = Writer::create(&args)?;
+    let sp = subscriber::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?;
+    let tq = subscriber::<TorqueCommand>(&node, inst, ServiceKind::Torque)?;
+    let st = subscriber::<JointState>(&node, inst, ServiceKind::State)?;
+    let cm = subscriber::<MotionCommand>(&node, inst, ServiceKind::Command)?;
+    let ss = subscriber::<ServiceStatus>(&node, inst, ServiceKind::Status)?;
+    let listeners = ServiceKind::ALL
+        .iter()
+        .map(|k| listener(&node, inst, *k))
+        .collect::<Result<Vec<_>>>()?;
+
+    let ws = waitset()?;
+    let mut guards = Vec::new();
+    for l in &listeners {
+        guards.push(
+            ws.attach_notification(l)
+                .map_err(|e| anyhow!("waitset: {e:?}"))?,
+        );
+    }
+    let timer = TimerFd::new().context("timerfd")?;
+    timer
+        .arm_absolute(monotonic_ns() + 100_000_000, 100_000_000)
+        .context("timerfd")?;
+    let _g_timer = ws
+        .attach_notification(&timer)
+        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+    let _g_stop = ws
+        .attach_notification(&shutdown)
+        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+
+    let (tx, rx) = mpsc::channel::<Received>();
+    let instance = args.instance.clone();
+    let writer_thread = std::thread::Builder::new()
+        .name("mcap-writer".into())
+        .spawn(move || -> Result<RecordSummary> {
+            nice_this_thread(10);
+            let mut w = writer;
+            let mut first_error = None;
+            for r in rx {
+                if first_error.is_none()
+                    && let Err(e) = w.write(&r)
+                {
+                    first_error = Some(e);
+                }
+            }
+            if let Some(e) = first_error {
+                return Err(e);
+            }
+            w.finish(&instance)
+        })
+        .context("cannot start the writer thread")?;
+
+    if let Some(path) = &args.ready_file {
+        File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+    }
+    println!("recording {}", args.out.display());
+    let _ = std::io::stdout().flush();
+
+    let start = monotonic_ns();
+    let end = args
+        .duration
+        .map(|d| start.saturating_add((d * 1e9) as u64));
+    let finalized = std::cell::Cell::new([false; 3]);
+    let mut settle_until: Option<u64> = None;
+    let mut on_payload = |p: &Payload| {
+        if let Payload::Status(s) = p
+            && s.lifecycle == LifecycleState::Finalized as u32
+            && (1..=3).contains(&s.role)
+        {
+            let mut f = finalized.get();
+            f[(s.role - 1) as usize] = true;
+            finalized.set(f);
+        }
+    };
+    let result = loop {
+        if let Err(e) = ws.wait_and_process_once(|_| CallbackProgression::Continue) {
+            break Err(anyhow!("waitset: {e:?}"));
+        }
+        for l in &listeners {
+            let _ = l.try_wait(|_| {});
+        }
+        drain(&sp, Payload::Setpoint, &tx, &mut on_payload);
+        drain(&tq, Payload::Torque, &tx, &mut on_payload);
+        drain(&st, Payload::State, &tx, &mut on_payload);
+        drain(&cm, Payload::Command, &tx, &mut on_payload);
+        drain(&ss, Payload::Status, &tx, &mut on_payload);
+        let _ = timer.read_expirations();
+        let now = monotonic_ns();
+        if shutdown.is_requested() || end.is_some_and(|e| now >= e) {
+            break Ok(());
+        }
+        if args.until_finalized && finalized.get().iter().all(|f| *f) {
+            // Give stragglers of the other streams one timer period to arrive.
+            match settle_until {
+                None => settle_until = Some(now + 100_000_000),
+                Some(t) if now >= t => break Ok(()),
+                Some(_) => {}
+            }
+        }
+    };
+    // Whatever is still queued goes in too.
+    drain(&sp, Payload::Setpoint, &tx, &mut on_payload);
+    drain(&tq, Payload::Torque, &tx, &mut on_payload);
+    drain(&st, Payload::State, &tx, &mut on_payload);
+    drain(&cm, Payload::Command, &tx, &mut on_payload);
+    drain(&ss, Payload::Status, &tx, &mut on_payload);
+    drop(tx);
+    let written = writer_thread
+        .join()
+        .map_err(|_| anyhow!("the MCAP writer thread panicked"))?;
+    result?;
+    let mut summary = written?;
+    summary.duration_s = monotonic_ns().saturating_sub(start) as f64 / 1e9;
+    let gaps: u64 = summary.gaps.values().sum();
+    eprintln!(
+        "recorded {} messages to {} in {:.1} s ({} lost to sequence gaps)",
+        summary.messages.values().sum::<u64>(),
+        summary.file,
+        summary.duration_s,
+        gaps
+    );
+    println!(
+        "{}",
+        serde_json::to_string(&summary).context("cannot serialise the summary")?
+    );
+    if summary.messages.values().all(|n| *n == 0) {
+        eprintln!(
+            "warning: nothing recorded from instance `{}`: was it running?",
+            args.instance
+        );
+    }
+    Ok(())
+}
