@@ -25,6 +25,7 @@ pub fn seed_case(d: f64, lim: &Limits1) -> (u8, f64, f64) {
 }
 
 /// Peak velocity of the zero-cruise profile covering `d` ≥ 0 (unbounded by vmax).
+#[inline]
 fn peak_velocity(d: f64, lim: &Limits1) -> f64 {
     let (a, j) = (lim.a, lim.j);
     let vp = (0.25 * d * d * j).cbrt();
@@ -77,6 +78,7 @@ fn jerk_limited_peak(d: f64, t: f64, j: f64, hi: f64) -> f64 {
 }
 
 /// Phases of a symmetric motion: ramp 0 → vp, cruise `tc`, ramp vp → 0.
+#[inline]
 fn symmetric(vp: f64, tc: f64, lim: &Limits1) -> Phases {
     let (t1, t2, _) = ramp_from_rest(vp, lim);
     let mut ph = Phases::default();
@@ -91,6 +93,7 @@ fn symmetric(vp: f64, tc: f64, lim: &Limits1) -> Phases {
 }
 
 /// Time-optimal rest-to-rest phases over a distance `d` ≥ 0.
+#[inline]
 pub fn time_optimal(d: f64, lim: &Limits1) -> Phases {
     if d <= 0.0 {
         return Phases::default();
@@ -105,6 +108,7 @@ pub fn time_optimal(d: f64, lim: &Limits1) -> Phases {
 
 /// Duration of [`time_optimal`]`(d, lim)`, bit for bit (the same sum in the same
 /// order), without building the phases.
+#[inline]
 pub fn time_optimal_duration(d: f64, lim: &Limits1) -> f64 {
     if d <= 0.0 {
         return 0.0;
@@ -123,6 +127,7 @@ pub fn time_optimal_duration(d: f64, lim: &Limits1) -> f64 {
 
 /// Rest-to-rest phases over `d` ≥ 0 finishing exactly at `t` (≥ the minimum): the
 /// peak velocity vp solves d = vp·(t − T_ramp(vp)).
+#[inline]
 pub fn stretched(d: f64, t: f64, lim: &Limits1) -> Phases {
     if d <= 0.0 {
         return Phases::default();
