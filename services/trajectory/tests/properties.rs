@@ -282,11 +282,16 @@ proptest! {
             limits: lim,
         };
         let tr = Trajectory::plan(&req).expect("plans");
-        let e = tr.sample(t * (1.0 - 1e-13));
-        prop_assert!((e.q[0] - q1).abs() < 1e-9 && e.qd[0].abs() < 1e-9);
+        // The blend acceleration: large when the cruise velocity is barely above the mean.
+        let acc = v.abs() / (t - h / v);
+        let end = tr.sample(t);
+        prop_assert!((end.q[0] - q1).abs() < 1e-9 && end.qd[0].abs() < 1e-9);
+        // Just before the end the velocity is acc·dt (decelerating to rest), no more.
+        let dt = t * 1e-13;
+        let e = tr.sample(t - dt);
+        prop_assert!((e.q[0] - q1).abs() < 1e-9 && e.qd[0].abs() <= 2.0 * acc * dt + 1e-12);
         let peaks = tr.peaks();
         prop_assert!((peaks.velocity[0] - v.abs()).abs() < 1e-9 * v.abs());
-        let acc = v.abs() / (t - h / v);
         check_walk(&tr, 1, &[[v.abs(), acc, f64::INFINITY]], false, 0.0)?;
     }
 }
