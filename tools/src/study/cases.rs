@@ -250,10 +250,10 @@ pub fn run_case(
         st.peak_torque[i] = tau_i.iter().fold(0.0, |m, x| m.max(x.abs()));
         let mut sq = 0.0;
         let mut energy = 0.0;
-        for k in 0..=n {
+        for (k, (t, qd)) in tau_i.iter().zip(&c.qd).enumerate() {
             let w = if k == 0 || k == n { 0.5 } else { 1.0 };
-            sq += w * tau_i[k] * tau_i[k];
-            energy += w * (tau_i[k] * c.qd[k][i]).abs();
+            sq += w * t * t;
+            energy += w * (t * qd[i]).abs();
         }
         st.rms_torque[i] = (sq / n as f64).sqrt();
         st.energy += energy * dt;

@@ -70,7 +70,7 @@ pub fn tf_label(tf: f64) -> String {
     s.trim_end_matches(".0").to_string()
 }
 
-fn case<'a>(study: &'a Study, m: Method, k: usize) -> Option<&'a Case> {
+fn case(study: &Study, m: Method, k: usize) -> Option<&Case> {
     let tf = *study.args.final_times.get(k)?;
     study.cases.iter().find(|c| c.method == m && c.tf == tf)
 }
@@ -78,6 +78,13 @@ fn case<'a>(study: &'a Study, m: Method, k: usize) -> Option<&'a Case> {
 fn history(c: &Case, f: impl Fn(usize) -> f64) -> Vec<(f64, f64)> {
     thin((0..c.t.len()).map(|k| (c.t[k], f(k))).collect())
 }
+
+/// What a job draws: file name, size, grid, caption, panels.
+type Figure = (String, (u32, u32), (usize, usize), String, Vec<Panel>);
+/// A quantity of joint 1 over time: title, unit, value at sample k.
+type Joint1Quantity = (&'static str, String, fn(&Case, usize) -> f64);
+/// A quantity of every joint: title, unit suffix, value at sample k of joint i.
+type JointQuantity = (&'static str, &'static str, fn(&Case, usize, usize) -> f64);
 
 /// Draws `job` into `out/figures/`; returns (file, width, height, caption).
 pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u32, String)> {
@@ -89,13 +96,7 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
     } else {
         "deg or mm"
     };
-    let (file, size, grid, caption, panels): (
-        String,
-        (u32, u32),
-        (usize, usize),
-        String,
-        Vec<Panel>,
-    ) = match *job {
+    let (file, size, grid, caption, panels): Figure = match *job {
         Job::Workspace => {
             let pts = &study.workspace.fine.points;
             let proj = |a: usize, b: usize, ta: &str, tb: &str| Panel {
@@ -199,7 +200,7 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
         Job::Joint1(m) => {
             let (sc, u) = joint_unit(robot, 0);
             let cs: Vec<&Case> = study.cases.iter().filter(|c| c.method == m).collect();
-            let quantities: [(&str, String, fn(&Case, usize) -> f64); 4] = [
+            let quantities: [Joint1Quantity; 4] = [
                 ("position", u.to_string(), |c, k| c.q[k][0]),
                 ("velocity", format!("{u}/s"), |c, k| c.qd[k][0]),
                 ("acceleration", format!("{u}/s²"), |c, k| c.qdd[k][0]),
@@ -262,7 +263,7 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
             let Some(c) = case(study, m, k) else {
                 anyhow::bail!("no case for {} #{k}", m.key());
             };
-            let quantities: [(&str, &str, fn(&Case, usize, usize) -> f64); 4] = [
+            let quantities: [JointQuantity; 4] = [
                 ("position", "", |c, k, i| c.q[k][i]),
                 ("velocity", "/s", |c, k, i| c.qd[k][i]),
                 ("acceleration", "/s²", |c, k, i| c.qdd[k][i]),

@@ -109,11 +109,11 @@ pub fn parse(text: &str, file: &str, stem: &str, dof: usize) -> Result<StudyMoti
             start = Some(v);
             break;
         }
-        if let Some(st) = t.get("start").and_then(Value::as_table) {
-            if let Some(v) = angles(st, &["q"], &format!("{prefix}start."), file, dof)? {
-                start = Some(v);
-                break;
-            }
+        if let Some(st) = t.get("start").and_then(Value::as_table)
+            && let Some(v) = angles(st, &["q"], &format!("{prefix}start."), file, dof)?
+        {
+            start = Some(v);
+            break;
         }
     }
     let mut targets = Vec::new();
