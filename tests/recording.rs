@@ -1,0 +1,329 @@
+//! Recording a lockstep run to MCAP and everything done with the file afterwards:
+//! read back by the `mcap` crate's reader (counts per topic, JSON matching the schemas),
+//! `export` (CSV rows), `plot` (PNGs), `replay` (torques bit for bit; an altered
+//! setpoint is reported).
+
+mod common;
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::Path;
+
+use common::*;
+use serde_json::Value;
+
+/// Field names of `v`, nested ones as `outer.inner`.
+fn keys(prefix: &str, v: &Value, out: &mut BTreeSet<String>) {
+    if let Value::Object(m) = v {
+        for (k, x) in m {
+            let key = format!("{prefix}{k}");
+            if x.is_object() {
+                keys(&format!("{key}."), x, out);
+            } else {
+                out.insert(key);
+            }
+        }
+    }
+}
+
+/// Property names of a JSON Schema, nested ones as `outer.inner`.
+fn schema_keys(prefix: &str, s: &Value, out: &mut BTreeSet<String>) {
+    if let Some(Value::Object(props)) = s.get("properties") {
+        for (k, x) in props {
+            let key = format!("{prefix}{k}");
+            if x.get("type") == Some(&Value::from("object")) {
+                schema_keys(&format!("{key}."), x, out);
+            } else {
+                out.insert(key);
+            }
+        }
+    }
+}
+
+/// Reads `path` with the `mcap` crate: messages per topic, checking every message
+/// against its channel's schema field names.
+fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
+    let bytes = std::fs::read(path).expect("read recording");
+    let mut out: BTreeMap<String, Vec<Value>> = BTreeMap::new();
+    let mut schema_fields: HashMap<String, BTreeSet<String>> = HashMap::new();
+    for m in mcap::MessageStream::new(&bytes).expect("MCAP header") {
+        let m = m.expect("MCAP message");
+        let topic = m.channel.topic.clone();
+        assert_eq!(m.channel.message_encoding, "json");
+        let schema = m
+            .channel
+            .schema
+            .as_ref()
+            .expect("every channel has a schema");
+        assert_eq!(schema.encoding, "jsonschema");
+        let fields = schema_fields.entry(topic.clone()).or_insert_with(|| {
+            let s: Value = serde_json::from_slice(&schema.data).expect("schema is JSON");
+            let mut k = BTreeSet::new();
+            schema_keys("", &s, &mut k);
+            k
+        });
+        let v: Value = serde_json::from_slice(&m.data).expect("message is JSON");
+        let mut k = BTreeSet::new();
+        keys("", &v, &mut k);
+        assert_eq!(&k, fields, "`{topic}` message fields vs its schema");
+        assert_eq!(m.log_time, m.publish_time);
+        out.entry(topic).or_default().push(v);
+    }
+    // The file is finished: summary and indexes present.
+    let summary = mcap::Summary::read(&bytes)
+        .expect("summary readable")
+        .expect("the recorder finished the file (summary section)");
+    assert!(!summary.chunk_indexes.is_empty(), "chunk indexes written");
+    out
+}
+
+/// Copies `src` to `dst` with `q[0]` of the setpoint at position `which` changed.
+fn alter_setpoint(src: &Path, dst: &Path, which: usize) -> u64 {
+    let bytes = std::fs::read(src).expect("read recording");
+    let file = std::fs::File::create(dst).expect("create altered copy");
+    let mut w = mcap::WriteOptions::new()
+        .compression(None)
+        .create(std::io::BufWriter::new(file))
+        .expect("writer");
+    let mut channels: HashMap<u16, u16> = HashMap::new();
+    let mut n = 0;
+    let mut altered_seq = 0;
+    for m in mcap::MessageStream::new(&bytes).expect("MCAP header") {
+        let m = m.expect("MCAP message");
+        let id = match channels.get(&m.channel.id) {
+            Some(id) => *id,
+            None => {
+                let s = m.channel.schema.as_ref().expect("schema");
+                let sid = w.add_schema(&s.name, &s.encoding, &s.data).expect("schema");
+                let cid = w
+                    .add_channel(
+                        sid,
+                        &m.channel.topic,
+                        &m.channel.message_encoding,
+                        &m.channel.metadata,
+                    )
+                    .expect("channel");
+                channels.insert(m.channel.id, cid);
+                cid
+            }
+        };
+        let mut data = m.data.to_vec();
+        if m.channel.topic == "setpoint" {
+            if n == which {
+                let mut v: Value = serde_json::from_slice(&data).expect("JSON");
+                let q0 = v["q"][0].as_f64().expect("q_0");
+                v["q"][0] = Value::from(q0 + 1e-3);
+                altered_seq = v["header"]["seq"].as_u64().expect("seq");
+                data = serde_json::to_vec(&v).expect("JSON");
+            }
+            n += 1;
+        }
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: id,
+                sequence: m.sequence,
+                log_time: m.log_time,
+                publish_time: m.publish_time,
+            },
+            &data,
+        )
+        .expect("write");
+    }
+    w.finish().expect("finish");
+    altered_seq
+}
+
+#[test]
+fn lockstep_run_recorded_exported_plotted_and_replayed_bit_for_bit() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("record");
+    let cfg = write_config(
+        dir.path(),
+        &inst,
+        &format!(
+            "program = \"{}\"\nlockstep = true",
+            table4_program().display()
+        ),
+        "",
+    );
+    let cfg_s = cfg.to_str().expect("utf-8").to_string();
+    let mcap_path = dir.path().join("run.mcap");
+    let mcap_s = mcap_path.to_str().expect("utf-8").to_string();
+    let ready = dir.path().join("recorder.ready");
+
+    // The recorder first (it subscribes before the planner publishes anything), then the run.
+    let rec = start(&[
+        "record",
+        "--instance",
+        &inst,
+        "--out",
+        &mcap_s,
+        "--until-finalized",
+        "--ready-file",
+        ready.to_str().expect("utf-8"),
+    ]);
+    let t0 = std::time::Instant::now();
+    while !ready.exists() {
+        assert!(t0.elapsed().as_secs() < 60, "recorder not ready in 60 s");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let summary_path = dir.path().join("summary.json");
+    let out = run(
+        &[
+            "run",
+            "--config",
+            &cfg_s,
+            "--lockstep",
+            "--duration",
+            "2",
+            "--quiet",
+            "--summary-json",
+            summary_path.to_str().expect("utf-8"),
+        ],
+        180.0,
+    );
+    assert_eq!(out.code(), Some(0), "run; stderr:\n{}", out.stderr);
+    let recorded = rec.finish(60.0);
+    assert_eq!(
+        recorded.code(),
+        Some(0),
+        "record; stderr:\n{}",
+        recorded.stderr
+    );
+    let s = summary(&summary_path);
+    let report: Value = serde_json::from_str(
+        recorded
+            .stdout
+            .lines()
+            .last()
+            .expect("recorder prints a summary line"),
+    )
+    .expect("recorder summary is JSON");
+    eprintln!("run cycles {}; recorder {report}", s["cycles"]);
+
+    // Read back by the mcap crate.
+    let topics = read_back(&mcap_path);
+    let count = |t: &str| topics.get(t).map_or(0, Vec::len) as u64;
+    let gaps = |t: &str| report["gaps"][t].as_u64().expect("gaps");
+    for t in ["setpoint", "torque", "state", "status"] {
+        assert!(count(t) > 0, "no `{t}` messages: {report}");
+        assert_eq!(report["messages"][t], count(t), "{t}: {report}");
+    }
+    let planner = s["cycles"]["planner"].as_u64().expect("planner cycles");
+    let dynamics = s["cycles"]["dynamics"].as_u64().expect("dynamics cycles");
+    assert!(planner > 100, "a 2 s lockstep run does many cycles: {s}");
+    // Lockstep free-wheels (~5 kHz here): on a loaded 2-core machine the recorder can be
+    // held off longer than the 64-sample queue lasts. Nothing may be lost silently:
+    // what is missing is exactly what the recorder reports as sequence gaps.
+    assert_eq!(
+        count("setpoint") + gaps("setpoint"),
+        planner,
+        "setpoints vs planner cycles: {report}"
+    );
+    assert_eq!(
+        count("torque") + gaps("torque"),
+        dynamics,
+        "torques vs dynamics cycles: {report}"
+    );
+    if gaps("setpoint") + gaps("torque") + gaps("state") > 0 {
+        eprintln!("warning: the recorder lost messages under load: {report}");
+    }
+    let seqs = |t: &str| {
+        topics[t]
+            .iter()
+            .map(|v| v["header"]["seq"].as_u64().expect("seq"))
+            .collect::<Vec<_>>()
+    };
+    let span = |v: Vec<u64>| v.last().copied().unwrap_or(0) + 1 - v.first().copied().unwrap_or(1);
+    assert_eq!(span(seqs("setpoint")), count("setpoint") + gaps("setpoint"));
+    assert_eq!(span(seqs("torque")), count("torque") + gaps("torque"));
+    assert_eq!(topics["setpoint"][0]["q"].as_array().map(Vec::len), Some(6));
+
+    // Export: one CSV per topic, a header plus one row per message.
+    let csv_dir = dir.path().join("csv");
+    let ex = run(
+        &["export", &mcap_s, "--csv", csv_dir.to_str().expect("utf-8")],
+        120.0,
+    );
+    assert_eq!(ex.code(), Some(0), "export; stderr:\n{}", ex.stderr);
+    for t in ["setpoint", "torque", "state", "status"] {
+        let text = std::fs::read_to_string(csv_dir.join(format!("{t}.csv"))).expect("csv");
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len() as u64, count(t) + 1, "{t}.csv rows");
+        if t == "setpoint" {
+            let head: Vec<&str> = lines[0].split(',').collect();
+            assert!(head.contains(&"q_5") && !head.contains(&"q_6"), "{head:?}");
+            assert!(head.contains(&"header.seq"), "{head:?}");
+        }
+    }
+
+    // Plot: three non-empty PNGs.
+    let png_dir = dir.path().join("png");
+    let pl = run(
+        &["plot", &mcap_s, "--out", png_dir.to_str().expect("utf-8")],
+        180.0,
+    );
+    assert_eq!(pl.code(), Some(0), "plot; stderr:\n{}", pl.stderr);
+    for f in ["torque.png", "tracking_error.png", "latency.png"] {
+        let b = std::fs::read(png_dir.join(f)).expect("png");
+        assert!(b.len() > 1000 && b.starts_with(b"\x89PNG"), "{f}");
+    }
+
+    // Replay: the torques again, bit for bit (config from the recording's attachment).
+    assert_eq!(report["config_attached"], true, "{report}");
+    let rp = run(&["replay", &mcap_s], 180.0);
+    assert_eq!(rp.code(), Some(0), "replay; stderr:\n{}", rp.stderr);
+    let r: Value = serde_json::from_str(rp.stdout.trim()).expect("replay report");
+    assert_eq!(r["identical"], true, "{r}");
+    // Torques whose setpoint or state the recorder lost cannot be recomputed.
+    let compared = r["compared"].as_u64().expect("compared");
+    assert!(compared * 10 >= count("torque") * 9, "{r}");
+    assert_eq!(r["differences"], 0, "{r}");
+
+    // An altered setpoint is reported, naming it.
+    let altered = dir.path().join("altered.mcap");
+    let seq = alter_setpoint(&mcap_path, &altered, (count("setpoint") / 2) as usize);
+    let rp = run(
+        &[
+            "replay",
+            altered.to_str().expect("utf-8"),
+            "--config",
+            &cfg_s,
+        ],
+        180.0,
+    );
+    assert_ne!(
+        rp.code(),
+        Some(0),
+        "altered replay must fail: {}",
+        rp.stdout
+    );
+    assert!(
+        rp.stderr.contains(&format!("setpoint seq {seq} ")),
+        "first difference names setpoint {seq}: {}",
+        rp.stderr
+    );
+}
+
+#[test]
+fn bad_recordings_are_refused_with_the_file_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let junk = dir.path().join("junk.mcap");
+    std::fs::write(&junk, b"not an mcap file").expect("write");
+    let junk_s = junk.to_str().expect("utf-8");
+    for args in [
+        vec!["replay", junk_s],
+        vec!["export", junk_s, "--csv", "/tmp"],
+        vec!["plot", junk_s, "--out", "/tmp"],
+    ] {
+        let out = run(&args, 60.0);
+        assert_eq!(out.code(), Some(1), "{args:?}");
+        assert!(out.stderr.contains("junk.mcap"), "{args:?}: {}", out.stderr);
+    }
+    let missing = run(&["replay", "/nonexistent/x.mcap"], 60.0);
+    assert_eq!(missing.code(), Some(1));
+    assert!(
+        missing.stderr.contains("/nonexistent/x.mcap"),
+        "{}",
+        missing.stderr
+    );
+}

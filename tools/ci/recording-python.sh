@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# CI step: a lockstep run recorded by `microrobot record`, read back by Python's `mcap`
+# package (an MCAP reader independent of ours): every topic present, every message
+# JSON with its schema's required fields, setpoints == torques == the run's cycles.
+# Usage: bash tools/ci/recording-python.sh [path/to/microrobot]   (from the repo root)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+bin="${1:-target/release/microrobot}"
+[ -x "$bin" ] || cargo build --release --bin microrobot
+work="$(mktemp -d)"
+trap 'rm -rf "$work"' EXIT
+python3 -m venv "$work/venv"
+"$work/venv/bin/pip" install --quiet 'mcap>=1.1,<2'
+
+inst="ci-rec-$$"
+"$bin" record --instance "$inst" --out "$work/run.mcap" --until-finalized \
+    --ready-file "$work/ready" >"$work/record.out" &
+rec=$!
+for _ in $(seq 1 200); do [ -e "$work/ready" ] && break; sleep 0.05; done
+[ -e "$work/ready" ] || { echo "recorder did not become ready"; kill "$rec"; exit 1; }
+"$bin" run --lockstep --duration 2 --instance "$inst" --quiet --summary-json "$work/summary.json" >/dev/null
+wait "$rec"
+
+"$work/venv/bin/python" - "$work/run.mcap" "$work/summary.json" <<'PY'
+import json, sys
+from mcap.reader import make_reader
+counts, required = {}, {}
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f)
+    for schema, channel, message in reader.iter_messages():
+        assert channel.message_encoding == "json", channel
+        assert schema.encoding == "jsonschema", schema
+        req = required.setdefault(channel.topic, set(json.loads(schema.data)["required"]))
+        msg = json.loads(message.data)
+        assert set(msg) == req, (channel.topic, set(msg) ^ req)
+        counts[channel.topic] = counts.get(channel.topic, 0) + 1
+s = json.load(open(sys.argv[2]))
+print("python mcap reader:", counts, "run cycles:", s["cycles"])
+assert counts.get("setpoint") == s["cycles"]["planner"], (counts, s["cycles"])
+assert counts.get("torque") == s["cycles"]["dynamics"], (counts, s["cycles"])
+assert counts.get("status", 0) > 0, counts
+PY
