@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # CI step: a lockstep run recorded by `microrobot record`, read back by Python's `mcap`
 # package (an MCAP reader independent of ours): every topic present, every message
-# JSON with its schema's required fields, setpoints == torques == the run's cycles.
+# JSON with its schema's required fields, setpoints and torques (+ reported gaps) == the run's cycles.
 # Usage: bash tools/ci/recording-python.sh [path/to/microrobot]   (from the repo root)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -21,7 +21,7 @@ for _ in $(seq 1 200); do [ -e "$work/ready" ] && break; sleep 0.05; done
 "$bin" run --lockstep --duration 2 --instance "$inst" --quiet --summary-json "$work/summary.json" >/dev/null
 wait "$rec"
 
-"$work/venv/bin/python" - "$work/run.mcap" "$work/summary.json" <<'PY'
+"$work/venv/bin/python" - "$work/run.mcap" "$work/summary.json" "$work/record.out" <<'PY'
 import json, sys
 from mcap.reader import make_reader
 counts, required = {}, {}
@@ -35,8 +35,9 @@ with open(sys.argv[1], "rb") as f:
         assert set(msg) == req, (channel.topic, set(msg) ^ req)
         counts[channel.topic] = counts.get(channel.topic, 0) + 1
 s = json.load(open(sys.argv[2]))
+gaps = json.loads(open(sys.argv[3]).read().strip().splitlines()[-1])["gaps"]  # reported losses
 print("python mcap reader:", counts, "run cycles:", s["cycles"])
-assert counts.get("setpoint") == s["cycles"]["planner"], (counts, s["cycles"])
-assert counts.get("torque") == s["cycles"]["dynamics"], (counts, s["cycles"])
+assert counts.get("setpoint") + gaps["setpoint"] == s["cycles"]["planner"], (counts, gaps, s["cycles"])
+assert counts.get("torque") + gaps["torque"] == s["cycles"]["dynamics"], (counts, gaps, s["cycles"])
 assert counts.get("status", 0) > 0, counts
 PY

@@ -12,7 +12,7 @@ use super::{Recording, setpoint_from, state_from, torque_from};
 
 // The study's drawing helpers (bundled font, grid of panels), compiled in here as well
 // because `study::plot` is private to the study.
-#[allow(dead_code)]
+#[allow(dead_code, clippy::duplicate_mod)]
 #[path = "../study/plot.rs"]
 mod figure;
 
