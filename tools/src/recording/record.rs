@@ -51,6 +51,9 @@ pub struct RecordArgs {
     /// Stop once planner, dynamics and actuator have each published their final status.
     #[arg(long)]
     pub until_finalized: bool,
+    /// SCHED_FIFO priority of the draining thread (0: normal scheduling).
+    #[arg(long, default_value_t = 10, value_name = "PRIO")]
+    pub rt_priority: i32,
 }
 
 /// What the recorder reports at the end (one JSON line on stdout).
@@ -371,6 +374,23 @@ pub fn main(args: RecordArgs) -> Result<()> {
         })
         .context("cannot start the writer thread")?;
 
+    // The drain thread (this one, not the writer spawned above) asks for SCHED_FIFO so a
+    // free-wheeling lockstep chain cannot starve it past the 64-sample queues; best effort.
+    let fifo = if args.rt_priority > 0 {
+        let p = libc::sched_param {
+            sched_priority: args.rt_priority,
+        };
+        // SAFETY: plain syscall on the calling thread.
+        unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &p) == 0 }
+    } else {
+        false
+    };
+    if args.rt_priority > 0 && !fifo {
+        eprintln!(
+            "warning: SCHED_FIFO {} refused; draining at normal priority",
+            args.rt_priority
+        );
+    }
     if let Some(path) = &args.ready_file {
         File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
     }
