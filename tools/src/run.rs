@@ -63,6 +63,10 @@ pub struct RunArgs {
     /// No progress output, only the summary.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Record every topic to this MCAP file (`microrobot record`, started before the
+    /// services so it sees the first setpoint, stopped after them).
+    #[arg(long, value_name = "FILE.mcap")]
+    pub record: Option<PathBuf>,
 }
 
 /// Runs the pipeline; the exit code is one of [`exit_code`].
@@ -467,6 +471,14 @@ fn supervise(args: &RunArgs) -> Result<u8, Failure> {
     let grace = Duration::from_secs_f64((cfg.supervisor.stop_timeout_ms / 1000.0).max(1.0));
     let program_given = cfg.program.is_some();
 
+    let mut recorder = match &args.record {
+        Some(out) => Some(
+            start_recorder(out, &instance_name, &run_dir, ready_timeout)
+                .map_err(fail(exit_code::FAILURE))?,
+        ),
+        None => None,
+    };
+
     let mut outcome: Option<(Stop, u8, String)> = None;
 
     // Start in order, each after the previous one is ready.
@@ -651,7 +663,14 @@ fn supervise(args: &RunArgs) -> Result<u8, Failure> {
     let (stop, mut code, message) =
         outcome.unwrap_or((Stop::Interrupted, exit_code::OK, String::new()));
     let all_clean = pipe.stop_all(&mut monitor, grace);
+    let recorded = recorder.as_mut().is_none_or(|r| stop_recorder(r, grace));
     progress.finish();
+    if !recorded {
+        eprintln!(
+            "error: the recorder did not finish its file cleanly (see its log in {})",
+            run_dir.display()
+        );
+    }
     if !message.is_empty() {
         eprintln!("error: {message}");
     }
@@ -662,6 +681,9 @@ fn supervise(args: &RunArgs) -> Result<u8, Failure> {
             Some(st) => describe(st),
             None => "not started".to_string(),
         };
+    }
+    if code == exit_code::OK && !recorded {
+        code = exit_code::FAILURE;
     }
     if code == exit_code::OK && !all_clean {
         eprintln!(
@@ -723,4 +745,66 @@ fn supervise(args: &RunArgs) -> Result<u8, Failure> {
             .map_err(fail(exit_code::FAILURE))?;
     }
     Ok(code)
+}
+
+/// Starts `microrobot record` for the instance and waits until all its subscribers are
+/// open (it creates its ready file then), so it sees the pipeline's first message.
+fn start_recorder(
+    out: &Path,
+    instance: &str,
+    run_dir: &Path,
+    timeout: Duration,
+) -> anyhow::Result<Service> {
+    let exe = std::env::current_exe().context("cannot find the microrobot executable")?;
+    let ready = run_dir.join("recorder.ready");
+    let _ = std::fs::remove_file(&ready);
+    let launch = Launch {
+        role: "recorder",
+        argv: vec![
+            exe.display().to_string(),
+            "record".into(),
+            "--instance".into(),
+            instance.into(),
+            "--out".into(),
+            out.display().to_string(),
+            "--ready-file".into(),
+            ready.display().to_string(),
+        ],
+        env: Vec::new(),
+        log: run_dir.join("recorder.log"),
+    };
+    let log = launch.log.clone();
+    let mut recorder = Service::spawn(launch)?;
+    let deadline = Instant::now() + timeout;
+    while !ready.exists() {
+        if let Some(st) = recorder.poll_exit() {
+            anyhow::bail!(
+                "the recorder exited at start ({}): {}",
+                describe(st),
+                log_tail(&log, 5)
+            );
+        }
+        if Instant::now() > deadline {
+            recorder.kill_and_reap();
+            anyhow::bail!("the recorder was not ready within {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    Ok(recorder)
+}
+
+/// Asks the recorder to finish its file (SIGINT) and waits for it; true if it exited 0.
+fn stop_recorder(recorder: &mut Service, grace: Duration) -> bool {
+    recorder.signal(libc::SIGINT);
+    let deadline = Instant::now() + grace;
+    loop {
+        if let Some(st) = recorder.poll_exit() {
+            return st.success();
+        }
+        if Instant::now() > deadline {
+            recorder.kill_and_reap();
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }

@@ -10,13 +10,7 @@ use anyhow::{Context as _, Result, bail};
 
 use super::{Recording, setpoint_from, state_from, torque_from};
 
-// The study's drawing helpers (bundled font, grid of panels), compiled in here as well
-// because `study::plot` is private to the study.
-#[allow(dead_code, clippy::duplicate_mod)]
-#[path = "../study/plot.rs"]
-mod figure;
-
-use figure::{Panel, Series, draw, thin};
+use crate::study::plot::{Panel, Series, draw, thin};
 
 /// Options of `microrobot plot`.
 #[derive(Debug, Clone, clap::Args)]

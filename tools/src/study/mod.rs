@@ -12,7 +12,7 @@ mod figures;
 mod kinematics;
 mod mintime;
 mod motion;
-mod plot;
+pub mod plot;
 mod report;
 mod verdicts;
 
