@@ -18,8 +18,10 @@ pub mod stream;
 
 pub use command::{CommandKind, MotionCommand, ProfileKind, TargetSpace};
 pub use ports::{BusError, ServiceKind, open_event, open_publish_subscribe, service_name};
-pub use status::{LatencySummary, ServiceRole, ServiceStatus, LifecycleState};
-pub use stream::{Header, JointSetpoint, JointState, TorqueCommand, setpoint_flags, state_flags, torque_flags};
+pub use status::{LatencySummary, LifecycleState, ServiceRole, ServiceStatus};
+pub use stream::{
+    Header, JointSetpoint, JointState, TorqueCommand, setpoint_flags, state_flags, torque_flags,
+};
 
 /// Joint capacity of every payload. A message carries `dof` active joints; entries past
 /// `dof` are zero and must be ignored.
