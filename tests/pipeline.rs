@@ -18,15 +18,7 @@ use common::*;
 fn table4_lockstep(test: &str, extra_args: &[&str]) -> (serde_json::Value, String) {
     let dir = tempfile::tempdir().expect("tempdir");
     let inst = instance(test);
-    let cfg = write_config(
-        dir.path(),
-        &inst,
-        &format!(
-            "program = \"{}\"\nlockstep = true",
-            table4_program().display()
-        ),
-        "",
-    );
+    let cfg = write_config(dir.path(), &inst, &table4_lockstep_lines(), "");
     let summary_path = dir.path().join("summary.json");
     let cfg_s = cfg.to_str().expect("utf-8").to_string();
     let sum_s = summary_path.to_str().expect("utf-8").to_string();
@@ -131,10 +123,7 @@ fn lockstep_runs_are_bit_identical() {
         let cfg = write_config(
             dir.path(),
             &inst,
-            &format!(
-                "program = \"{}\"\nlockstep = true",
-                table4_program().display()
-            ),
+            &table4_lockstep_lines(),
             // Noise with a fixed seed must repeat too.
             "[actuator.sim]\nsensor_noise_rad = 1e-6\nseed = 7",
         );
@@ -205,10 +194,7 @@ fn example_driver_in_place_of_the_actuator_runs_table4_to_the_end() {
     let cfg = write_config(
         dir.path(),
         &inst,
-        &format!(
-            "program = \"{}\"\nlockstep = true",
-            table4_program().display()
-        ),
+        &table4_lockstep_lines(),
         &format!(
             "[actuator]\ncommand = [\"{}\", \"--instance\", \"{{instance}}\", \"--rate-hz\", \"{{rate_hz}}\"]",
             driver.display()

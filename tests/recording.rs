@@ -136,15 +136,7 @@ fn alter_setpoint(src: &Path, dst: &Path, which: usize) -> u64 {
 fn lockstep_run_recorded_exported_plotted_and_replayed_bit_for_bit() {
     let dir = tempfile::tempdir().expect("tempdir");
     let inst = instance("record");
-    let cfg = write_config(
-        dir.path(),
-        &inst,
-        &format!(
-            "program = \"{}\"\nlockstep = true",
-            table4_program().display()
-        ),
-        "",
-    );
+    let cfg = write_config(dir.path(), &inst, &table4_lockstep_lines(), "");
     let cfg_s = cfg.to_str().expect("utf-8").to_string();
     let mcap_path = dir.path().join("run.mcap");
     let mcap_s = mcap_path.to_str().expect("utf-8").to_string();

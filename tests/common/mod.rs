@@ -42,6 +42,14 @@ pub fn seed_arm() -> PathBuf {
     repo().join("config/robots/seed-arm.toml")
 }
 
+/// Top-level config lines that run the seed's Table 4 program in lockstep.
+pub fn table4_lockstep_lines() -> String {
+    format!(
+        "program = \"{}\"\nlockstep = true",
+        table4_program().display()
+    )
+}
+
 /// Writes a pipeline config for `instance` into `dir`: the seed arm, real time settings
 /// that need no privileges, and `extra` TOML appended (top-level keys first, then tables).
 pub fn write_config(dir: &Path, instance: &str, top_level: &str, tables: &str) -> PathBuf {
