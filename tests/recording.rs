@@ -271,6 +271,26 @@ fn lockstep_run_recorded_exported_plotted_and_replayed_bit_for_bit() {
     assert!(compared * 10 >= count("torque") * 9, "{r}");
     assert_eq!(r["differences"], 0, "{r}");
 
+    // Closed loop: the whole lockstep loop again in one process (planner, dynamics and
+    // simulated arm, no IPC): every recorded setpoint, torque and state, bit for bit.
+    let cl = run(&["replay", "--closed-loop", &mcap_s], 180.0);
+    assert_eq!(
+        cl.code(),
+        Some(0),
+        "closed-loop replay; stderr:\n{}",
+        cl.stderr
+    );
+    let r: Value = serde_json::from_str(cl.stdout.trim()).expect("closed-loop report");
+    assert_eq!(r["identical"], true, "{r}");
+    assert_eq!(r["differences"], 0, "{r}");
+    for (t, key) in [
+        ("setpoint", "setpoints"),
+        ("torque", "torques"),
+        ("state", "states"),
+    ] {
+        assert_eq!(r[key], count(t), "every recorded {t} compared: {r}");
+    }
+
     // An altered setpoint is reported, naming it.
     let altered = dir.path().join("altered.mcap");
     let seq = alter_setpoint(&mcap_path, &altered, (count("setpoint") / 2) as usize);
@@ -293,6 +313,23 @@ fn lockstep_run_recorded_exported_plotted_and_replayed_bit_for_bit() {
         rp.stderr.contains(&format!("setpoint seq {seq} ")),
         "first difference names setpoint {seq}: {}",
         rp.stderr
+    );
+    let cl = run(
+        &[
+            "replay",
+            "--closed-loop",
+            altered.to_str().expect("utf-8"),
+            "--config",
+            &cfg_s,
+        ],
+        180.0,
+    );
+    assert_ne!(cl.code(), Some(0), "altered closed-loop replay must fail");
+    assert!(
+        cl.stderr
+            .contains(&format!("setpoint seq {seq}: q[1] recorded")),
+        "first difference names setpoint {seq} and its field: {}",
+        cl.stderr
     );
 }
 

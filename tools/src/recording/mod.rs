@@ -10,6 +10,7 @@
 //! (`header.stamp_ns`, `stamp_ns`), in ns. The resolved pipeline config, when the
 //! recorder found it, is attached as `pipeline.resolved.toml`.
 
+pub mod closed_loop;
 pub mod export;
 pub mod plot;
 pub mod record;

@@ -21,6 +21,9 @@ use microrobot_model::Robot;
 use microrobot_runtime::PipelineConfig;
 use serde::Serialize;
 
+use super::closed_loop::{
+    ClosedLoop, first_difference, setpoint_content, state_content, torque_content,
+};
 use super::{CONFIG_ATTACHMENT, Recording, setpoint_from, state_from, torque_from};
 
 /// Options of `microrobot replay`.
@@ -32,6 +35,10 @@ pub struct ReplayArgs {
     /// Pipeline config (default: the one attached to the recording, else config/pipeline.toml).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
+    /// Re-run the whole lockstep loop in process (planner, dynamics and simulated arm,
+    /// no IPC) and compare every recorded setpoint, torque and state bit for bit.
+    #[arg(long)]
+    pub closed_loop: bool,
 }
 
 /// Outcome of a replay (printed as one JSON line on stdout).
@@ -175,8 +182,162 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     Ok(report)
 }
 
-/// Runs `microrobot replay`: exit 0 only when every compared torque is bit-identical.
+/// Outcome of a closed-loop replay (printed as one JSON line on stdout).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct ClosedLoopReport {
+    pub file: String,
+    /// Where the config came from.
+    pub config: String,
+    /// Ticks the in-process loop ran.
+    pub ticks: u64,
+    /// Recorded messages compared, per stream.
+    pub setpoints: u64,
+    pub torques: u64,
+    pub states: u64,
+    /// Recorded messages the replay differs from or never produced.
+    pub differences: u64,
+    pub identical: bool,
+    /// The first difference, in words.
+    pub first_difference: Option<String>,
+}
+
+/// Runs the recording's lockstep loop in process ([`ClosedLoop`]) and compares every
+/// recorded message with the replay's message of the same sequence number.
+pub fn replay_closed_loop(args: &ReplayArgs) -> Result<ClosedLoopReport> {
+    let file = &args.file;
+    let rec = Recording::read(file)?;
+    let by_seq = |v: Vec<(u64, Vec<(String, u64)>)>| v.into_iter().collect::<HashMap<_, _>>();
+    let setpoints = rec.parse(file, "setpoint", setpoint_from)?;
+    let torques = rec.parse(file, "torque", torque_from)?;
+    let states = rec.parse(file, "state", state_from)?;
+    if setpoints.is_empty() || torques.is_empty() || states.is_empty() {
+        bail!(
+            "{}: a closed-loop replay needs recorded `setpoint`, `torque` and `state` messages",
+            file.display()
+        );
+    }
+    let mut sp = by_seq(
+        setpoints
+            .iter()
+            .map(|m| (m.header.seq, setpoint_content(m)))
+            .collect(),
+    );
+    let mut tq = by_seq(
+        torques
+            .iter()
+            .map(|m| (m.header.seq, torque_content(m)))
+            .collect(),
+    );
+    let mut st = by_seq(
+        states
+            .iter()
+            .map(|m| (m.header.seq, state_content(m)))
+            .collect(),
+    );
+    let (cfg, origin) = load_config(args, &rec)?;
+    let mut sim = ClosedLoop::new(&cfg)?;
+    let mut report = ClosedLoopReport {
+        file: file.display().to_string(),
+        config: origin,
+        ..Default::default()
+    };
+    let note = |report: &mut ClosedLoopReport, d: Option<String>| {
+        if let Some(d) = d {
+            report.differences += 1;
+            report.first_difference.get_or_insert(d);
+        }
+    };
+    let check = |map: &mut HashMap<u64, Vec<(String, u64)>>,
+                 what: &str,
+                 seq: u64,
+                 got: Vec<(String, u64)>,
+                 n: &mut u64|
+     -> Option<String> {
+        let recorded = map.remove(&seq)?;
+        *n += 1;
+        first_difference(&format!("{what} seq {seq}"), &recorded, &got)
+    };
+    let s0 = sim.initial_state();
+    let d = check(
+        &mut st,
+        "state",
+        s0.header.seq,
+        state_content(&s0),
+        &mut report.states,
+    );
+    note(&mut report, d);
+    // Every recorded message has a sequence number no larger than the loop's tick count
+    // (+1 for the initial state); a few spare ticks would show a late one.
+    let last = [&sp, &tq, &st]
+        .iter()
+        .filter_map(|m| m.keys().max().copied())
+        .max()
+        .unwrap_or(0);
+    while report.ticks <= last && !(sp.is_empty() && tq.is_empty() && st.is_empty()) {
+        let out = sim.tick();
+        report.ticks += 1;
+        let seq = out.setpoint.header.seq;
+        let d = check(
+            &mut sp,
+            "setpoint",
+            seq,
+            setpoint_content(&out.setpoint),
+            &mut report.setpoints,
+        );
+        note(&mut report, d);
+        if let Some(t) = &out.torque {
+            let d = check(
+                &mut tq,
+                "torque",
+                t.header.seq,
+                torque_content(t),
+                &mut report.torques,
+            );
+            note(&mut report, d);
+        }
+        let d = check(
+            &mut st,
+            "state",
+            out.state.header.seq,
+            state_content(&out.state),
+            &mut report.states,
+        );
+        note(&mut report, d);
+    }
+    for (what, left) in [("setpoint", &sp), ("torque", &tq), ("state", &st)] {
+        if let Some(seq) = left.keys().min() {
+            let d = Some(format!(
+                "{what} seq {seq}: recorded, but the replay never produced it ({} such {what}s)",
+                left.len()
+            ));
+            report.differences += left.len() as u64 - 1;
+            note(&mut report, d);
+        }
+    }
+    report.identical = report.differences == 0 && report.torques > 0;
+    Ok(report)
+}
+
+/// Runs `microrobot replay`: exit 0 only when every compared message is bit-identical.
 pub fn main(args: ReplayArgs) -> Result<()> {
+    if args.closed_loop {
+        let report = replay_closed_loop(&args)?;
+        println!(
+            "{}",
+            serde_json::to_string(&report).context("cannot serialise the report")?
+        );
+        if let Some(d) = &report.first_difference {
+            bail!(
+                "closed-loop replay differs from the recording in {} messages; first: {d}",
+                report.differences
+            );
+        }
+        eprintln!(
+            "replay: {} setpoints, {} torques and {} states bit-identical to the in-process loop ({} ticks, config {})",
+            report.setpoints, report.torques, report.states, report.ticks, report.config
+        );
+        return Ok(());
+    }
     let report = replay(&args)?;
     println!(
         "{}",
