@@ -13,7 +13,7 @@
 
 use super::from_state::brake_point;
 use super::velocity::{ramp, ramp_from_rest, velocity_change};
-use super::{Kin, Limits1, Phases, rest_to_rest, solve_known, solve_tol, stop_velocity};
+use super::{Kin, Limits1, Phases, newton_increasing, rest_to_rest, solve_tol, stop_velocity};
 
 /// Prepared stretch problem for one joint (positive frame).
 #[derive(Debug, Clone, Copy)]
@@ -109,9 +109,14 @@ impl Stretch {
         Some(ph)
     }
 
-    /// f(vp) and validity (cruise ≥ 0).
+    /// f(vp), its derivative and validity (cruise ≥ 0).
+    ///
+    /// f(vp) = D1 + D2 + vp·Tc − d with Tc = t − T1 − T2. Each ramp satisfies
+    /// dD/dvp − vp·dT/dvp = a_peak/(2J) (a_peak its peak |acceleration|, with or
+    /// without an amax phase, either direction), so f'(vp) = Tc + (a1 + a2)/(2J) > 0:
+    /// f increases wherever the cruise is non-negative.
     #[inline]
-    fn f(&self, vp: f64, t: f64, lim: &Limits1) -> (f64, bool) {
+    fn f(&self, vp: f64, t: f64, lim: &Limits1) -> (f64, f64, bool) {
         let (v, a) = (self.v0, self.a0);
         let r1 = ramp(v, a, vp, lim);
         let k = r1.integrate(Kin { p: 0.0, v, a });
@@ -123,16 +128,18 @@ impl Stretch {
         } else {
             tc
         };
-        (k.p + d2 + vp * tc - self.d, tc >= 0.0)
+        // a1/(2J) = t[2]/2 (the ramp's last phase takes its peak to 0), a2/(2J) = t1/2.
+        let df = tc + 0.5 * (r1.t[2] + t1);
+        (k.p + d2 + vp * tc - self.d, df, tc >= 0.0)
     }
 
     fn search(&self, t: f64, lim: &Limits1) -> Option<Phases> {
         let u = self.vp_hi;
-        let (fu, ok_u) = self.f(u, t, lim);
+        let (fu, _, ok_u) = self.f(u, t, lim);
         let mut bracket = None;
         if ok_u && fu >= 0.0 {
             let m = stop_velocity(self.v0, self.a0, lim.j).clamp(0.0, u);
-            let (fm, ok_m) = self.f(m, t, lim);
+            let (fm, _, ok_m) = self.f(m, t, lim);
             if ok_m && fm <= 0.0 {
                 bracket = Some(((m, fm), (u, fu)));
             }
@@ -142,7 +149,7 @@ impl Stretch {
             let mut prev: Option<(f64, f64)> = ok_u.then_some((u, fu));
             for k in (0..N).rev() {
                 let x = u * k as f64 / N as f64;
-                let (fx, ok) = self.f(x, t, lim);
+                let (fx, _, ok) = self.f(x, t, lim);
                 if !ok {
                     prev = None;
                     continue;
@@ -157,17 +164,28 @@ impl Stretch {
                 prev = Some((x, fx));
             }
         }
-        let (lo, hi) = bracket?;
-        let vp = solve_known(
+        let ((lo, flo), (hi, fhi)) = bracket?;
+        // f increases on the valid part of the bracket; an invalid point (negative
+        // cruise) counts as below the root, and its NaN slope makes Newton bisect.
+        let vp = newton_increasing(
             |vp| {
-                let (fx, ok) = self.f(vp, t, lim);
-                if ok { fx } else { -1.0 - self.d.abs() }
+                let (fx, df, ok) = self.f(vp, t, lim);
+                if ok {
+                    (fx, df)
+                } else {
+                    (-1.0 - self.d.abs(), f64::NAN)
+                }
             },
             lo,
             hi,
+            if fhi > flo {
+                (lo * fhi - hi * flo) / (fhi - flo)
+            } else {
+                hi
+            },
             1e-14 * (1.0 + self.d.abs()),
         );
-        let (fx, ok) = self.f(vp, t, lim);
+        let (fx, _, ok) = self.f(vp, t, lim);
         if !ok || fx.abs() > 1e-9 * (1.0 + self.d.abs()) {
             return None;
         }
