@@ -21,6 +21,8 @@ struct JointWork {
     t_opt: f64,
     /// Peak velocity of the optimal motion, anchoring its stretch.
     anchor: Option<f64>,
+    /// Brake point of `after`, relative to it.
+    pb: f64,
 }
 
 /// Every joint starts at rest: closed forms only (no brake, no blocked intervals,
@@ -127,16 +129,16 @@ pub(crate) fn plan_soft(
         let t_brake = ph.duration();
         let after = ph.integrate(k0(i));
         let d = target_q[i] - after.p;
-        let (opt, anchor) = if after.v == 0.0 && after.a == 0.0 {
+        let (opt, anchor, pb) = if after.v == 0.0 && after.a == 0.0 {
             let mut r = rest_to_rest::time_optimal(d.abs(), &lim);
             if d < 0.0 {
                 for p in &mut r.p[..r.n] {
                     p.j = -p.j;
                 }
             }
-            (r, None)
+            (r, None, 0.0)
         } else {
-            from_state::time_optimal_peak(after.v, after.a, d, &lim)
+            from_state::time_optimal_with_brake_point(after.v, after.a, d, &lim)
         };
         ph.extend(&opt);
         plans[i] = ph;
@@ -145,6 +147,7 @@ pub(crate) fn plan_soft(
             t_brake,
             t_opt: t_brake + opt.duration(),
             anchor,
+            pb,
         };
         t_sync = t_sync.max(work[i].t_opt);
     }
@@ -160,12 +163,13 @@ pub(crate) fn plan_soft(
             }
             let lim = limits1(limits, i);
             let st = *stretches[i].get_or_insert_with(|| {
-                Stretch::with_anchor(
+                Stretch::prepared(
                     w.after.v,
                     w.after.a,
                     target_q[i] - w.after.p,
                     &lim,
                     w.anchor,
+                    w.pb,
                 )
             });
             match st.phases(t_sync - w.t_brake, &lim) {

@@ -89,13 +89,24 @@ pub fn time_optimal(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
 /// towards +) at which its acceleration crosses zero, when it does: the anchor of
 /// the stretch family ([`super::stretch::Stretch::with_anchor`]).
 pub fn time_optimal_peak(v0: f64, a0: f64, d: f64, lim: &Limits1) -> (Phases, Option<f64>) {
+    let (ph, peak, _) = time_optimal_with_brake_point(v0, a0, d, lim);
+    (ph, peak)
+}
+
+/// [`time_optimal_peak`], plus the brake point of (v0, a0) (relative to the start).
+pub(crate) fn time_optimal_with_brake_point(
+    v0: f64,
+    a0: f64,
+    d: f64,
+    lim: &Limits1,
+) -> (Phases, Option<f64>, f64) {
     let pb = brake_point(v0, a0, lim);
     let sg = if d >= pb { 1.0 } else { -1.0 };
     let (mut ph, peak) = positive(sg * v0, sg * a0, sg * d, sg * pb, lim);
     for p in &mut ph.p[..ph.n] {
         p.j *= sg;
     }
-    (ph, peak)
+    (ph, peak, pb)
 }
 
 /// Push duration at which the stop velocity of the pushed state reaches 0 (positive

@@ -24,11 +24,12 @@ pub struct Stretch {
     d: f64,
     /// Upper anchor of the peak-velocity search (vmax, or the zero-cruise vp).
     vp_hi: f64,
-    /// Duration of the fastest stop, and of the fastest rest-to-rest move from the
-    /// stop point to the target: the fallback "stop, then move" needs their sum.
-    t_stop: f64,
+    /// Brake point (positive frame): where the fastest stop ends.
+    pb: f64,
+    /// From rest: the time-optimal duration (nothing shorter is reachable).
     t_r2r: f64,
     rest: bool,
+    lim: Limits1,
 }
 
 impl Stretch {
@@ -40,6 +41,23 @@ impl Stretch {
     /// [`Stretch::new`] given the optimal motion's peak velocity (from
     /// [`super::from_state::time_optimal_peak`]), which saves a root search.
     pub fn with_anchor(v0: f64, a0: f64, d: f64, lim: &Limits1, anchor: Option<f64>) -> Self {
+        let pb = if v0 == 0.0 && a0 == 0.0 {
+            0.0
+        } else {
+            brake_point(v0, a0, lim)
+        };
+        Self::prepared(v0, a0, d, lim, anchor, pb)
+    }
+
+    /// [`Stretch::with_anchor`] given the brake point `pb` of (v0, a0) as well.
+    pub(crate) fn prepared(
+        v0: f64,
+        a0: f64,
+        d: f64,
+        lim: &Limits1,
+        anchor: Option<f64>,
+        pb: f64,
+    ) -> Self {
         if v0 == 0.0 && a0 == 0.0 {
             let t_r2r = rest_to_rest::time_optimal_duration(d.abs(), lim);
             return Self {
@@ -48,12 +66,12 @@ impl Stretch {
                 a0,
                 d: d.abs(),
                 vp_hi: lim.v,
-                t_stop: 0.0,
+                pb: 0.0,
                 t_r2r,
                 rest: true,
+                lim: *lim,
             };
         }
-        let pb = brake_point(v0, a0, lim);
         let sg = if d >= pb { 1.0 } else { -1.0 };
         let (v, a, dd) = (sg * v0, sg * a0, sg * d);
         let dist = |vp: f64| {
@@ -75,16 +93,23 @@ impl Stretch {
             a0: a,
             d: dd,
             vp_hi,
-            t_stop: ramp(v, a, 0.0, lim).duration(),
-            t_r2r: rest_to_rest::time_optimal_duration((d - pb).abs(), lim),
+            pb: sg * pb,
+            t_r2r: 0.0,
             rest: false,
+            lim: *lim,
         }
     }
 
     /// A duration from which on every longer one is reachable (stop, then a
     /// rest-to-rest move); shorter ones down to the minimum usually are too.
+    /// (Computed on demand: only synchronisation past a blocked duration needs it.)
     pub fn guaranteed(&self) -> f64 {
-        self.t_stop + self.t_r2r
+        if self.rest {
+            return self.t_r2r;
+        }
+        let lim = &self.lim;
+        ramp(self.v0, self.a0, 0.0, lim).duration()
+            + rest_to_rest::time_optimal_duration((self.d - self.pb).abs(), lim)
     }
 
     /// Phases (original frame) finishing at exactly `t`, or `None` when this family
@@ -135,34 +160,96 @@ impl Stretch {
 
     fn search(&self, t: f64, lim: &Limits1) -> Option<Phases> {
         let u = self.vp_hi;
-        let (fu, _, ok_u) = self.f(u, t, lim);
-        let mut bracket = None;
+        let (fu, dfu, ok_u) = self.f(u, t, lim);
+        let mut vp = None;
         if ok_u && fu >= 0.0 {
+            // Above the stop velocity T1 + T2 grows with vp, so [m, u] is all valid
+            // and f increases on it: Newton from the top, f(m) only looked at when a
+            // step falls below m.
             let m = stop_velocity(self.v0, self.a0, lim.j).clamp(0.0, u);
-            let (fm, _, ok_m) = self.f(m, t, lim);
-            if ok_m && fm <= 0.0 {
-                bracket = Some(((m, fm), (u, fu)));
-            }
+            vp = self.newton_from_top(m, (u, fu, dfu), t, lim);
         }
-        if bracket.is_none() {
-            const N: usize = 16;
-            let mut prev: Option<(f64, f64)> = ok_u.then_some((u, fu));
-            for k in (0..N).rev() {
-                let x = u * k as f64 / N as f64;
-                let (fx, _, ok) = self.f(x, t, lim);
-                if !ok {
-                    prev = None;
-                    continue;
-                }
-                if let Some((xp, fp)) = prev
-                    && fp >= 0.0
-                    && fx <= 0.0
-                {
-                    bracket = Some(((x, fx), (xp, fp)));
-                    break;
-                }
-                prev = Some((x, fx));
+        if vp.is_none() {
+            vp = self.grid_search(u, (fu, ok_u), t, lim);
+        }
+        let vp = vp?;
+        let mut ph = velocity_change(self.v0, self.a0, vp, lim);
+        let (t1, t2, _) = ramp_from_rest(vp, lim);
+        ph.push((t - ph.duration() - 2.0 * t1 - t2).max(0.0), 0.0);
+        ph.push(t1, -lim.j);
+        ph.push(t2, 0.0);
+        ph.push(t1, lim.j);
+        Some(ph)
+    }
+
+    /// Root of f on [m, u] by safeguarded Newton steps from u (f(u) ≥ 0 given, with
+    /// its slope); `None` when f(m) > 0 (the root, if any, lies below m).
+    fn newton_from_top(
+        &self,
+        m: f64,
+        (u, fu, dfu): (f64, f64, f64),
+        t: f64,
+        lim: &Limits1,
+    ) -> Option<f64> {
+        let ftol = 1e-14 * (1.0 + self.d.abs());
+        let tiny = 4.0 * f64::EPSILON * u.abs().max(f64::MIN_POSITIVE);
+        let (mut lo, mut hi, mut lo_checked) = (m, u, false);
+        let (mut x, mut fx, mut dfx) = (u, fu, dfu);
+        for _ in 0..100 {
+            if fx.abs() <= ftol {
+                return Some(x);
             }
+            if fx < 0.0 {
+                (lo, lo_checked) = (x, true);
+            } else {
+                hi = x;
+            }
+            let mut xn = x - fx / dfx;
+            if !(xn >= lo && xn <= hi) {
+                if !lo_checked {
+                    let (fm, _, ok_m) = self.f(m, t, lim);
+                    if !ok_m || fm > 0.0 {
+                        return None;
+                    }
+                    lo_checked = true;
+                }
+                xn = 0.5 * (lo + hi);
+            }
+            if (xn - x).abs() <= tiny || hi - lo <= tiny {
+                let (f_end, _, ok) = self.f(xn, t, lim);
+                return (ok && f_end.abs() <= 1e-9 * (1.0 + self.d.abs())).then_some(xn);
+            }
+            let (f2, df2, ok) = self.f(xn, t, lim);
+            (x, fx, dfx) = if ok {
+                (xn, f2, df2)
+            } else {
+                (xn, -1.0 - self.d.abs(), f64::NAN)
+            };
+        }
+        None
+    }
+
+    /// Fallback: a 16-point grid from u down to 0 for a sign change between two valid
+    /// points, then safeguarded Newton inside it.
+    fn grid_search(&self, u: f64, (fu, ok_u): (f64, bool), t: f64, lim: &Limits1) -> Option<f64> {
+        const N: usize = 16;
+        let mut bracket = None;
+        let mut prev: Option<(f64, f64)> = ok_u.then_some((u, fu));
+        for k in (0..N).rev() {
+            let x = u * k as f64 / N as f64;
+            let (fx, _, ok) = self.f(x, t, lim);
+            if !ok {
+                prev = None;
+                continue;
+            }
+            if let Some((xp, fp)) = prev
+                && fp >= 0.0
+                && fx <= 0.0
+            {
+                bracket = Some(((x, fx), (xp, fp)));
+                break;
+            }
+            prev = Some((x, fx));
         }
         let ((lo, flo), (hi, fhi)) = bracket?;
         // f increases on the valid part of the bracket; an invalid point (negative
@@ -186,16 +273,7 @@ impl Stretch {
             1e-14 * (1.0 + self.d.abs()),
         );
         let (fx, _, ok) = self.f(vp, t, lim);
-        if !ok || fx.abs() > 1e-9 * (1.0 + self.d.abs()) {
-            return None;
-        }
-        let mut ph = velocity_change(self.v0, self.a0, vp, lim);
-        let (t1, t2, _) = ramp_from_rest(vp, lim);
-        ph.push((t - ph.duration() - 2.0 * t1 - t2).max(0.0), 0.0);
-        ph.push(t1, -lim.j);
-        ph.push(t2, 0.0);
-        ph.push(t1, lim.j);
-        Some(ph)
+        (ok && fx.abs() <= 1e-9 * (1.0 + self.d.abs())).then_some(vp)
     }
 
     /// Fastest stop, then a rest-to-rest move taking the remaining time.
@@ -214,7 +292,10 @@ impl Stretch {
         let mut ph = stop;
         let mv = rest_to_rest::stretched(
             (self.d - pb).abs(),
-            (t - stop.duration()).max(self.t_r2r),
+            (t - stop.duration()).max(rest_to_rest::time_optimal_duration(
+                (self.d - pb).abs(),
+                lim,
+            )),
             lim,
         );
         let s = if self.d >= pb { 1.0 } else { -1.0 };
