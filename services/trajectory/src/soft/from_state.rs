@@ -373,7 +373,7 @@ mod tests {
             let pb = brake_point(v0, a0, &lim);
             let tmax = tau_max(v0, a0, &lim);
             let p_max = push_then_stop_end(v0, a0, tmax, &lim);
-            if !(d < p_max) {
+            if d >= p_max {
                 continue;
             }
             let got = push_duration(v0, a0, d, pb, tmax, p_max, &lim);

@@ -134,14 +134,17 @@ impl Stretch {
         Some(ph)
     }
 
-    /// f(vp), its derivative and validity (cruise ≥ 0).
+    /// f(vp), its first two derivatives and validity (cruise ≥ 0).
     ///
     /// f(vp) = D1 + D2 + vp·Tc − d with Tc = t − T1 − T2. Each ramp satisfies
     /// dD/dvp − vp·dT/dvp = a_peak/(2J) (a_peak its peak |acceleration|, with or
     /// without an amax phase, either direction), so f'(vp) = Tc + (a1 + a2)/(2J) > 0:
-    /// f increases wherever the cruise is non-negative.
+    /// f increases wherever the cruise is non-negative. Differentiating once more,
+    /// each ramp adds −(dT/dvp − da_peak/dvp/(2J)): −s/A with an amax phase, else
+    /// −3s/(4 a_peak) (s = ±1, the sign of its velocity change). Where both ramps hold
+    /// amax, f is exactly quadratic (linear when the first ramp slows down).
     #[inline]
-    fn f(&self, vp: f64, t: f64, lim: &Limits1) -> (f64, f64, bool) {
+    fn eval(&self, vp: f64, t: f64, lim: &Limits1) -> Eval {
         let (v, a) = (self.v0, self.a0);
         let r1 = ramp(v, a, vp, lim);
         let k = r1.integrate(Kin { p: 0.0, v, a });
@@ -155,24 +158,74 @@ impl Stretch {
         };
         // a1/(2J) = t[2]/2 (the ramp's last phase takes its peak to 0), a2/(2J) = t1/2.
         let df = tc + 0.5 * (r1.t[2] + t1);
-        (k.p + d2 + vp * tc - self.d, df, tc >= 0.0)
+        let s1 = r1.j.signum();
+        let k1 = if r1.t[1] > 0.0 {
+            1.0 / lim.a
+        } else {
+            0.75 / (r1.t[2] * lim.j)
+        };
+        let k2 = if t2 > 0.0 {
+            1.0 / lim.a
+        } else {
+            0.75 / (t1 * lim.j)
+        };
+        Eval {
+            x: vp,
+            f: k.p + d2 + vp * tc - self.d,
+            df,
+            ddf: -(s1 * k1 + k2),
+            ok: tc >= 0.0,
+        }
+    }
+
+    /// Root of f on [lo, top.x], given f(top.x) ≥ 0, by safeguarded steps to the root
+    /// of the local quadratic model (exact where both ramps hold amax, cubically
+    /// convergent elsewhere; Newton where the model has no real root). f(lo) is only
+    /// evaluated when a step falls below lo. Invalid points (negative cruise) count
+    /// as below the root.
+    fn descend(&self, lo0: f64, top: Eval, t: f64, lim: &Limits1) -> Descent {
+        let ftol = 1e-14 * (1.0 + self.d.abs());
+        let tiny = 4.0 * f64::EPSILON * top.x.abs().max(f64::MIN_POSITIVE);
+        let (mut lo, mut hi, mut lo_checked) = (lo0, top.x, false);
+        let mut e = top;
+        for _ in 0..100 {
+            if e.ok && e.f.abs() <= ftol {
+                return Descent::Root(e.x);
+            }
+            if !e.ok || e.f < 0.0 {
+                (lo, lo_checked) = (e.x, true);
+            } else {
+                hi = e.x;
+            }
+            let mut xn = if e.ok { e.x + model_step(&e) } else { f64::NAN };
+            if !(xn >= lo && xn <= hi) {
+                if !lo_checked {
+                    let el = self.eval(lo0, t, lim);
+                    if el.ok && el.f > ftol {
+                        return Descent::LowPositive(el);
+                    }
+                    if el.ok && el.f.abs() <= ftol {
+                        return Descent::Root(lo0);
+                    }
+                    lo_checked = true;
+                }
+                xn = 0.5 * (lo + hi);
+            }
+            if (xn - e.x).abs() <= tiny || hi - lo <= tiny {
+                let en = self.eval(xn, t, lim);
+                return if en.ok && en.f.abs() <= 1e-9 * (1.0 + self.d.abs()) {
+                    Descent::Root(xn)
+                } else {
+                    Descent::Fail
+                };
+            }
+            e = self.eval(xn, t, lim);
+        }
+        Descent::Fail
     }
 
     fn search(&self, t: f64, lim: &Limits1) -> Option<Phases> {
-        let u = self.vp_hi;
-        let (fu, dfu, ok_u) = self.f(u, t, lim);
-        let mut vp = None;
-        if ok_u && fu >= 0.0 {
-            // Above the stop velocity T1 + T2 grows with vp, so [m, u] is all valid
-            // and f increases on it: Newton from the top, f(m) only looked at when a
-            // step falls below m.
-            let m = stop_velocity(self.v0, self.a0, lim.j).clamp(0.0, u);
-            vp = self.newton_from_top(m, (u, fu, dfu), t, lim);
-        }
-        if vp.is_none() {
-            vp = self.grid_search(u, (fu, ok_u), t, lim);
-        }
-        let vp = vp?;
+        let vp = self.peak_velocity(t, lim)?;
         let mut ph = velocity_change(self.v0, self.a0, vp, lim);
         let (t1, t2, _) = ramp_from_rest(vp, lim);
         ph.push((t - ph.duration() - 2.0 * t1 - t2).max(0.0), 0.0);
@@ -182,51 +235,29 @@ impl Stretch {
         Some(ph)
     }
 
-    /// Root of f on [m, u] by safeguarded Newton steps from u (f(u) ≥ 0 given, with
-    /// its slope); `None` when f(m) > 0 (the root, if any, lies below m).
-    fn newton_from_top(
-        &self,
-        m: f64,
-        (u, fu, dfu): (f64, f64, f64),
-        t: f64,
-        lim: &Limits1,
-    ) -> Option<f64> {
-        let ftol = 1e-14 * (1.0 + self.d.abs());
-        let tiny = 4.0 * f64::EPSILON * u.abs().max(f64::MIN_POSITIVE);
-        let (mut lo, mut hi, mut lo_checked) = (m, u, false);
-        let (mut x, mut fx, mut dfx) = (u, fu, dfu);
-        for _ in 0..100 {
-            if fx.abs() <= ftol {
-                return Some(x);
-            }
-            if fx < 0.0 {
-                (lo, lo_checked) = (x, true);
-            } else {
-                hi = x;
-            }
-            let mut xn = x - fx / dfx;
-            if !(xn >= lo && xn <= hi) {
-                if !lo_checked {
-                    let (fm, _, ok_m) = self.f(m, t, lim);
-                    if !ok_m || fm > 0.0 {
-                        return None;
-                    }
-                    lo_checked = true;
-                }
-                xn = 0.5 * (lo + hi);
-            }
-            if (xn - x).abs() <= tiny || hi - lo <= tiny {
-                let (f_end, _, ok) = self.f(xn, t, lim);
-                return (ok && f_end.abs() <= 1e-9 * (1.0 + self.d.abs())).then_some(xn);
-            }
-            let (f2, df2, ok) = self.f(xn, t, lim);
-            (x, fx, dfx) = if ok {
-                (xn, f2, df2)
-            } else {
-                (xn, -1.0 - self.d.abs(), f64::NAN)
+    /// The cruise velocity of the family member of duration `t`, if there is one.
+    fn peak_velocity(&self, t: f64, lim: &Limits1) -> Option<f64> {
+        let u = self.vp_hi;
+        let top = self.eval(u, t, lim);
+        let mut vp = None;
+        if top.ok && top.f >= 0.0 {
+            // Above the stop velocity m, T1 + T2 grows with vp, so [m, u] is all valid
+            // and f increases on it. When f(m) > 0 the root lies below m, on the valid
+            // stretch that ends at m (the first ramp then slows down to vp).
+            let m = stop_velocity(self.v0, self.a0, lim.j).clamp(0.0, u);
+            vp = match self.descend(m, top, t, lim) {
+                Descent::Root(x) => Some(x),
+                Descent::LowPositive(em) if m > 0.0 => match self.descend(0.0, em, t, lim) {
+                    Descent::Root(x) => Some(x),
+                    _ => None,
+                },
+                _ => None,
             };
         }
-        None
+        if vp.is_none() {
+            vp = self.grid_search(u, (top.f, top.ok), t, lim);
+        }
+        vp
     }
 
     /// Fallback: a 16-point grid from u down to 0 for a sign change between two valid
@@ -237,7 +268,7 @@ impl Stretch {
         let mut prev: Option<(f64, f64)> = ok_u.then_some((u, fu));
         for k in (0..N).rev() {
             let x = u * k as f64 / N as f64;
-            let (fx, _, ok) = self.f(x, t, lim);
+            let Eval { f: fx, ok, .. } = self.eval(x, t, lim);
             if !ok {
                 prev = None;
                 continue;
@@ -256,9 +287,9 @@ impl Stretch {
         // cruise) counts as below the root, and its NaN slope makes Newton bisect.
         let vp = newton_increasing(
             |vp| {
-                let (fx, df, ok) = self.f(vp, t, lim);
-                if ok {
-                    (fx, df)
+                let e = self.eval(vp, t, lim);
+                if e.ok {
+                    (e.f, e.df)
                 } else {
                     (-1.0 - self.d.abs(), f64::NAN)
                 }
@@ -272,8 +303,8 @@ impl Stretch {
             },
             1e-14 * (1.0 + self.d.abs()),
         );
-        let (fx, _, ok) = self.f(vp, t, lim);
-        (ok && fx.abs() <= 1e-9 * (1.0 + self.d.abs())).then_some(vp)
+        let e = self.eval(vp, t, lim);
+        (e.ok && e.f.abs() <= 1e-9 * (1.0 + self.d.abs())).then_some(vp)
     }
 
     /// Fastest stop, then a rest-to-rest move taking the remaining time.
@@ -303,5 +334,206 @@ impl Stretch {
             ph.push(p.t, s * p.j);
         }
         Some(ph)
+    }
+}
+
+/// f and its derivatives at one peak velocity (see [`Stretch::eval`]).
+#[derive(Debug, Clone, Copy)]
+struct Eval {
+    x: f64,
+    f: f64,
+    df: f64,
+    ddf: f64,
+    /// Cruise ≥ 0: the point belongs to the family.
+    ok: bool,
+}
+
+/// How a descent ended.
+enum Descent {
+    Root(f64),
+    /// f(lo) > 0: the root, if any, lies below lo.
+    LowPositive(Eval),
+    Fail,
+}
+
+/// Step to the root of f + f'·δ + f''·δ²/2 nearest δ = 0 (the stable form of the
+/// quadratic formula); a Newton step when that has no real root.
+#[inline]
+fn model_step(e: &Eval) -> f64 {
+    let disc = e.df * e.df - 2.0 * e.f * e.ddf;
+    let q = e.df + disc.sqrt();
+    let step = -2.0 * e.f / q;
+    // An infinite curvature (a ramp whose peak acceleration is 0 here) gives no step.
+    if e.ddf.is_finite() && disc >= 0.0 && step.is_finite() {
+        step
+    } else {
+        -e.f / e.df
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::soft::{from_state, solve_known};
+
+    /// Deterministic pseudo-random numbers in [0, 1).
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// Random start inside the limits (no brake needed) and target.
+    fn case(r: &mut Lcg) -> (f64, f64, f64, Limits1) {
+        let lim = Limits1 {
+            v: 0.2 + 5.0 * r.next(),
+            a: 0.2 + 5.0 * r.next(),
+            j: 0.2 + 20.0 * r.next(),
+        };
+        let a0 = (2.0 * r.next() - 1.0) * lim.a.min(0.99 * (4.0 * lim.j * lim.v).sqrt());
+        let s = a0 * a0.abs() / (2.0 * lim.j);
+        let (lo, hi) = ((-lim.v).max(-lim.v - s), lim.v.min(lim.v - s));
+        let v0 = lo + r.next() * (hi - lo) * 0.999;
+        let d = (2.0 * r.next() - 1.0) * 3.0;
+        (v0, a0, d, lim)
+    }
+
+    /// The old search, kept as the oracle: from the anchor down, bracket [m, u] or a
+    /// 16-point grid, then Illinois regula falsi.
+    fn vp_by_bracketing(st: &Stretch, t: f64, lim: &Limits1) -> Option<f64> {
+        let g = |vp: f64| {
+            let e = st.eval(vp, t, lim);
+            (e.f, e.ok)
+        };
+        let u = st.vp_hi;
+        let (fu, ok_u) = g(u);
+        let mut bracket = None;
+        if ok_u && fu >= 0.0 {
+            let m = stop_velocity(st.v0, st.a0, lim.j).clamp(0.0, u);
+            let (fm, ok_m) = g(m);
+            if ok_m && fm <= 0.0 {
+                bracket = Some(((m, fm), (u, fu)));
+            }
+        }
+        if bracket.is_none() {
+            let mut prev = ok_u.then_some((u, fu));
+            for k in (0..16).rev() {
+                let x = u * k as f64 / 16.0;
+                let (fx, ok) = g(x);
+                if !ok {
+                    prev = None;
+                    continue;
+                }
+                if let Some((xp, fp)) = prev
+                    && fp >= 0.0
+                    && fx <= 0.0
+                {
+                    bracket = Some(((x, fx), (xp, fp)));
+                    break;
+                }
+                prev = Some((x, fx));
+            }
+        }
+        let (lo, hi) = bracket?;
+        let vp = solve_known(
+            |vp| {
+                let (fx, ok) = g(vp);
+                if ok { fx } else { -1.0 - st.d.abs() }
+            },
+            lo,
+            hi,
+            1e-14 * (1.0 + st.d.abs()),
+        );
+        let (fx, ok) = g(vp);
+        (ok && fx.abs() <= 1e-9 * (1.0 + st.d.abs())).then_some(vp)
+    }
+
+    /// f' and f'' of `eval` are the derivatives of f (central differences away from
+    /// the kinks where a ramp changes direction or starts holding amax).
+    #[test]
+    fn eval_derivatives_match_differences() {
+        let mut r = Lcg(5);
+        let mut checked = 0;
+        for _ in 0..3000 {
+            let (v0, a0, d, lim) = case(&mut r);
+            let st = Stretch::new(v0, a0, d, &lim);
+            let t = 10.0 * r.next() + 1.0;
+            let x = 0.05 * lim.v + 0.9 * lim.v * r.next();
+            let h = 1e-5 * lim.v;
+            let (e, ep, em) = (
+                st.eval(x, t, &lim),
+                st.eval(x + h, t, &lim),
+                st.eval(x - h, t, &lim),
+            );
+            let smooth = (ep.ddf - em.ddf).abs() <= 1e-3 * (1.0 + e.ddf.abs())
+                && (ep.df - em.df - 2.0 * h * e.ddf).abs() <= 1e-3 * (1.0 + e.df.abs()) * h;
+            if !(e.ok && ep.ok && em.ok && smooth) {
+                continue;
+            }
+            checked += 1;
+            let d1 = (ep.f - em.f) / (2.0 * h);
+            assert!(
+                (d1 - e.df).abs() <= 1e-6 * (1.0 + e.df.abs()),
+                "f' {} vs {d1}",
+                e.df
+            );
+            let d2 = (ep.df - em.df) / (2.0 * h);
+            assert!(
+                (d2 - e.ddf).abs() <= 1e-4 * (1.0 + e.ddf.abs()),
+                "f'' {} vs {d2}",
+                e.ddf
+            );
+        }
+        assert!(checked > 1000, "only {checked} smooth points");
+    }
+
+    /// The model-step descent finds the same peak velocity as the old bracketed
+    /// search wherever that finds one, and every root it reports lands the motion on
+    /// the target at exactly t.
+    #[test]
+    fn descent_matches_bracketing_oracle() {
+        let mut r = Lcg(9);
+        let (mut both, mut only_new) = (0, 0);
+        for n in 0..4000 {
+            let (v0, a0, d, lim) = case(&mut r);
+            let st = Stretch::new(v0, a0, d, &lim);
+            let t_opt = from_state::time_optimal(v0, a0, d, &lim).duration();
+            let t = t_opt * (1.0 + [1e-9, 1e-3, 0.05, 0.3, 1.0, 3.0][n % 6] * r.next());
+            let old = vp_by_bracketing(&st, t, &lim);
+            let new = st.peak_velocity(t, &lim);
+            if let Some(ph) = st.search(t, &lim) {
+                let end = ph.integrate(Kin {
+                    p: 0.0,
+                    v: st.v0,
+                    a: st.a0,
+                });
+                assert!(
+                    (end.p - st.d).abs() <= 1e-8 * (1.0 + st.d.abs()),
+                    "case {n}: misses"
+                );
+                assert!((ph.duration() - t).abs() <= 1e-9 * t, "case {n}: not at t");
+            }
+            match (old, new) {
+                (Some(_), None) => panic!("case {n}: the oracle finds a root, the descent none"),
+                (Some(a), Some(b)) => {
+                    both += 1;
+                    assert!(
+                        (a - b).abs() <= 1e-7 * (1.0 + a),
+                        "case {n}: vp {b} vs oracle {a}"
+                    );
+                }
+                (None, Some(_)) => only_new += 1,
+                (None, None) => {}
+            }
+        }
+        assert!(
+            both > 3000,
+            "{both} cases compared ({only_new} found by the descent only)"
+        );
     }
 }
