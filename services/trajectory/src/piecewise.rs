@@ -82,7 +82,7 @@ impl Kin {
 /// Slots of a joint's table: the pieces plus one "hold" slot after the last.
 const SLOTS: usize = MAX_PHASES + 1;
 /// Length of the piece-end table searched by [`Piecewise::slot`], padded with +∞.
-const SEARCH: usize = 16;
+const SEARCH: usize = MAX_PHASES;
 
 /// One joint's motion: pieces of polynomials in local time, each starting where the
 /// previous ends. After the last piece the joint holds its final state. Pieces are
@@ -141,20 +141,19 @@ impl Piecewise {
 
     /// In-place [`Piecewise::from_phases`] (no copy of the whole table).
     pub fn set_phases(&mut self, start: Kin, phases: &Phases, fin: Option<Kin>) {
+        let n = phases.n.min(MAX_PHASES);
         let mut s = start;
         let mut t = 0.0;
-        self.n = 0;
-        self.end = [f64::INFINITY; SEARCH];
-        self.c45 = [0.0; 2];
-        for ph in &phases.p[..phases.n.min(MAX_PHASES)] {
-            let i = self.n;
-            self.t0[i] = t;
+        for (k, ph) in phases.p[..n].iter().enumerate() {
+            self.t0[k] = t;
             t += ph.t;
-            self.end[i] = t;
-            self.c[i] = [s.p, s.v, 0.5 * s.a, ph.j / 6.0];
-            self.n += 1;
+            self.end[k] = t;
+            self.c[k] = [s.p, s.v, 0.5 * s.a, ph.j * (1.0 / 6.0)];
             s = s.advance(ph.t, ph.j);
         }
+        self.end[n..].fill(f64::INFINITY);
+        self.n = n;
+        self.c45 = [0.0; 2];
         self.fin = fin.unwrap_or(s);
         self.seal();
     }
@@ -188,7 +187,7 @@ impl Piecewise {
                     t[i] += p.t;
                     pw.end[k] = t[i];
                     let si = s[i];
-                    pw.c[k] = [si.p, si.v, 0.5 * si.a, p.j / 6.0];
+                    pw.c[k] = [si.p, si.v, 0.5 * si.a, p.j * (1.0 / 6.0)];
                     s[i] = si.advance(p.t, p.j);
                 }
             }
