@@ -247,8 +247,11 @@ impl Piecewise {
     /// piece's c0; a piece only needs its interior looked at (by `interior`) when its
     /// velocity changes sign inside it.
     pub fn position_range(&self, interior: impl Fn(&[f64; 6], f64) -> (f64, f64)) -> (f64, f64) {
-        let (mut lo, mut hi) = (self.fin.p, self.fin.p);
         let quintic = self.is_quintic();
+        if !quintic {
+            return self.cubic_position_range();
+        }
+        let (mut lo, mut hi) = (self.fin.p, self.fin.p);
         for i in 0..self.n {
             let c = &self.c[i];
             lo = lo.min(c[0]);
@@ -272,6 +275,55 @@ impl Piecewise {
                 let (a, b) = interior(&self.coefficients(i), len);
                 lo = lo.min(a);
                 hi = hi.max(b);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// [`Piecewise::position_range`] of cubic pieces: q has its extremes at the piece
+    /// ends (each piece's c0, and the final state) and where the velocity
+    /// v(x) = c1 + 2c2·x + 3c3·x² vanishes inside a piece. A piece is skipped when v
+    /// keeps one sign over it: the same sign at both ends (the next slot's c1) and no
+    /// vertex of opposite sign in between.
+    fn cubic_position_range(&self) -> (f64, f64) {
+        let (mut lo, mut hi) = (self.fin.p, self.fin.p);
+        for i in 0..self.n.min(MAX_PHASES) {
+            let [c0, c1, c2, c3] = self.c[i];
+            lo = lo.min(c0);
+            hi = hi.max(c0);
+            let v_end = self.c[i + 1][1];
+            let len = self.end[i] - self.t0[i];
+            // Vertex of v (where the acceleration 2c2 + 6c3·x crosses zero).
+            let xv = if c3 != 0.0 { -c2 / (3.0 * c3) } else { -1.0 };
+            let inside = xv > 0.0 && xv < len;
+            let vv = c1 + xv * (2.0 * c2 + xv * 3.0 * c3);
+            let one_sign = (c1 >= 0.0 && v_end >= 0.0 && (!inside || vv >= 0.0))
+                || (c1 <= 0.0 && v_end <= 0.0 && (!inside || vv <= 0.0));
+            if one_sign {
+                continue;
+            }
+            // Roots of 3c3·x² + 2c2·x + c1 in (0, len), by the stable quadratic formula.
+            let (a, b) = (3.0 * c3, 2.0 * c2);
+            let mut take = |x: f64| {
+                if x > 0.0 && x < len {
+                    let q = c0 + x * (c1 + x * (c2 + x * c3));
+                    lo = lo.min(q);
+                    hi = hi.max(q);
+                }
+            };
+            if a == 0.0 {
+                if b != 0.0 {
+                    take(-c1 / b);
+                }
+            } else {
+                let disc = (b * b - 4.0 * a * c1).max(0.0);
+                let q = -0.5 * (b + b.signum() * disc.sqrt());
+                if q != 0.0 {
+                    take(q / a);
+                    take(c1 / q);
+                } else {
+                    take(-b / (2.0 * a));
+                }
             }
         }
         (lo, hi)
@@ -334,5 +386,52 @@ impl Piecewise {
             qdd + x2 * (12.0 * c4 + x * 20.0 * c5),
             j + x * (24.0 * c4 + x * 60.0 * c5),
         ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The cubic position range holds every sampled position and is reached by one
+    /// (fine-grid sampling of random constant-jerk phase lists, with velocity sign
+    /// changes inside pieces).
+    #[test]
+    fn cubic_position_range_matches_dense_sampling() {
+        let mut seed = 17u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..500 {
+            let mut ph = Phases::default();
+            for _ in 0..1 + (next() * 11.0) as usize {
+                ph.push(0.05 + next(), (2.0 * next() - 1.0) * 4.0);
+            }
+            let start = Kin {
+                p: 2.0 * next() - 1.0,
+                v: 2.0 * next() - 1.0,
+                a: 2.0 * next() - 1.0,
+            };
+            let pw = Piecewise::from_phases(start, &ph, None);
+            let (lo, hi) = pw.cubic_position_range();
+            let n = 20_000;
+            let (mut slo, mut shi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for k in 0..=n {
+                let q = pw.eval(pw.duration() * k as f64 / n as f64)[0];
+                slo = slo.min(q);
+                shi = shi.max(q);
+            }
+            assert!(
+                lo <= slo + 1e-12 && hi >= shi - 1e-12,
+                "{lo} {hi} vs {slo} {shi}"
+            );
+            assert!(
+                slo - lo <= 1e-6 && hi - shi <= 1e-6,
+                "{lo} {hi} vs {slo} {shi}"
+            );
+        }
     }
 }
