@@ -10,7 +10,7 @@
 //! family with the VEL/ACC0/ACC1 variants, for rest targets.
 
 use super::velocity::{ramp, velocity_change};
-use super::{Kin, Limits1, Phases, newton_increasing, stop_velocity};
+use super::{Kin, Limits1, Phases, model_root_increasing, stop_velocity};
 
 /// The push duration after which the stop velocity reaches vmax (positive frame).
 pub fn tau_max(v0: f64, a0: f64, lim: &Limits1) -> f64 {
@@ -130,14 +130,16 @@ fn tau_zero(v0: f64, a0: f64, lim: &Limits1) -> f64 {
     .max(0.0)
 }
 
-/// End position of "push τ, then stop" (positive frame) and its exact derivative
-/// d/dτ. With the pushed state (v, a) the stop distance S(v, a) has, for a stop
-/// decelerating to the peak w = √(J v + a²/2) (no amax phase):
-/// S_v = (a + 3w/2)/J, S_a = (J v + a² + 3aw/2)/J²; with an amax phase:
-/// S_v = (A² + 2Aa + 2Jv + a²)/(2AJ), S_a = (A + a)(Aa + 2Jv + a²)/(2AJ²).
+/// End position of "push τ, then stop" (positive frame) and its exact first two
+/// derivatives d/dτ. With the pushed state (v, a) the stop distance S(v, a) has, for
+/// a stop decelerating to the peak w = √(J v + a²/2) (no amax phase):
+/// S_v = (a + 3w/2)/J, S_a = (J v + a² + 3aw/2)/J², S_vv = 3/(4w),
+/// S_va = (1 + 3a/(4w))/J, S_aa = (2a + 3w/2 + 3a²/(4w))/J²; with an amax phase
+/// (q = 2Jv + a²): S_v = (A² + 2Aa + q)/(2AJ), S_a = (A + a)(Aa + q)/(2AJ²),
+/// S_vv = 1/A, S_va = (A + a)/(AJ), S_aa = (Aa + q + (A + a)(A + 2a))/(2AJ²).
 /// The push moves (p, v, a) at rates (v, a, J) while ramping, (v, A, 0) while holding.
 #[inline]
-fn end_and_slope(v0: f64, a0: f64, tau: f64, lim: &Limits1) -> (f64, f64) {
+fn end_and_slope(v0: f64, a0: f64, tau: f64, lim: &Limits1) -> (f64, f64, f64) {
     let (am, jm) = (lim.a, lim.j);
     let t_a = ((am - a0) / jm).max(0.0);
     let k = Kin {
@@ -151,29 +153,39 @@ fn end_and_slope(v0: f64, a0: f64, tau: f64, lim: &Limits1) -> (f64, f64) {
     let e = r.integrate(k).p;
     if r.j > 0.0 {
         // The stop starts by accelerating: still on the flat stretch before tau_zero.
-        return (e, 0.0);
+        return (e, 0.0, 0.0);
     }
     let (v, a) = (k.v, k.a);
     let w2 = jm * v + 0.5 * a * a;
-    let (s_v, s_a) = if w2 <= am * am {
+    let (s_v, s_a, s_vv, s_va, s_aa) = if w2 <= am * am {
         let w = w2.max(0.0).sqrt();
+        let iw = 1.0 / w;
         (
             (a + 1.5 * w) / jm,
             (jm * v + a * a + 1.5 * a * w) / (jm * jm),
+            0.75 * iw,
+            (1.0 + 0.75 * a * iw) / jm,
+            (2.0 * a + 1.5 * w + 0.75 * a * a * iw) / (jm * jm),
         )
     } else {
         let q = 2.0 * jm * v + a * a;
         (
             (am * am + 2.0 * am * a + q) / (2.0 * am * jm),
             (am + a) * (am * a + q) / (2.0 * am * jm * jm),
+            1.0 / am,
+            (am + a) / (am * jm),
+            (am * a + q + (am + a) * (am + 2.0 * a)) / (2.0 * am * jm * jm),
         )
     };
-    let slope = if tau > t_a {
-        v + s_v * am
+    if tau > t_a {
+        (e, v + s_v * am, am + s_vv * am * am)
     } else {
-        v + s_v * a + s_a * jm
-    };
-    (e, slope)
+        (
+            e,
+            v + s_v * a + s_a * jm,
+            a + s_vv * a * a + 2.0 * s_va * a * jm + s_aa * jm * jm + s_v * jm,
+        )
+    }
 }
 
 /// Positive-frame solution (d ≥ brake point `pb`, which is the end of τ = 0).
@@ -257,10 +269,10 @@ fn push_duration(v0: f64, a0: f64, d: f64, pb: f64, tmax: f64, p_max: f64, lim: 
         }
     }
     let x0 = (lo * fhi - hi * flo) / (fhi - flo);
-    newton_increasing(
+    model_root_increasing(
         |t| {
-            let (e, de) = end_and_slope(v0, a0, t, lim);
-            (e - d, de)
+            let (e, de, dde) = end_and_slope(v0, a0, t, lim);
+            (e - d, de, dde)
         },
         lo,
         hi,
@@ -324,16 +336,19 @@ mod tests {
     }
 
     #[test]
-    fn slope_is_the_derivative_of_the_end_position() {
+    fn slope_and_curvature_are_the_derivatives_of_the_end_position() {
         let mut r = Lcg(7);
         for _ in 0..2000 {
             let (v0, a0, _, lim) = case(&mut r);
             let (lo, hi) = (tau_zero(v0, a0, &lim), tau_max(v0, a0, &lim));
             let t = lo + r.next() * (hi - lo);
             let h = 1e-6 * (1.0 + t);
-            let (_, de) = end_and_slope(v0, a0, t, &lim);
+            let (_, de, dde) = end_and_slope(v0, a0, t, &lim);
             let num = (push_then_stop_end(v0, a0, t + h, &lim)
                 - push_then_stop_end(v0, a0, t - h, &lim))
+                / (2.0 * h);
+            let num2 = (end_and_slope(v0, a0, t + h, &lim).1
+                - end_and_slope(v0, a0, t - h, &lim).1)
                 / (2.0 * h);
             // Central differences straddle the kink at the start of the amax hold.
             let t_a = (lim.a - a0) / lim.j;
@@ -342,6 +357,19 @@ mod tests {
                     (de - num).abs() <= 1e-5 * (1.0 + num.abs()),
                     "v0 {v0} a0 {a0} {lim:?} t {t}: {de} vs {num}"
                 );
+                // The curvature jumps where the stop starts holding amax: skip there.
+                let k = push(a0, t, &lim).integrate(Kin {
+                    p: 0.0,
+                    v: v0,
+                    a: a0,
+                });
+                let w2 = lim.j * k.v + 0.5 * k.a * k.a;
+                if (w2.sqrt() - lim.a).abs() > 1e-3 * lim.a {
+                    assert!(
+                        (dde - num2).abs() <= 1e-4 * (1.0 + num2.abs()),
+                        "v0 {v0} a0 {a0} {lim:?} t {t}: e'' {dde} vs {num2}"
+                    );
+                }
             }
         }
     }

@@ -85,6 +85,53 @@ pub(crate) fn newton_increasing(
     x
 }
 
+/// [`newton_increasing`] with the second derivative too (`f` returns f, f', f''):
+/// each step goes to the root of the local quadratic model nearest x (cubically
+/// convergent; exact for a quadratic f), a Newton step where the model has no real
+/// root, a bisection where the step would leave the bracket.
+#[inline]
+pub(crate) fn model_root_increasing(
+    mut f: impl FnMut(f64) -> (f64, f64, f64),
+    mut lo: f64,
+    mut hi: f64,
+    x0: f64,
+    ftol: f64,
+) -> f64 {
+    let tiny = 4.0 * f64::EPSILON * lo.abs().max(hi.abs()).max(f64::MIN_POSITIVE);
+    let mut x = if x0 > lo && x0 < hi {
+        x0
+    } else {
+        0.5 * (lo + hi)
+    };
+    for _ in 0..100 {
+        let (fx, dfx, ddfx) = f(x);
+        if fx.abs() <= ftol {
+            return x;
+        }
+        if fx < 0.0 {
+            lo = x;
+        } else {
+            hi = x;
+        }
+        let disc = dfx * dfx - 2.0 * fx * ddfx;
+        let step = -2.0 * fx / (dfx + dfx.signum() * disc.sqrt());
+        let step = if ddfx.is_finite() && disc >= 0.0 && step.is_finite() {
+            step
+        } else {
+            -fx / dfx
+        };
+        let mut xn = x + step;
+        if !(xn >= lo && xn <= hi) {
+            xn = 0.5 * (lo + hi);
+        }
+        if (xn - x).abs() <= tiny || hi - lo <= tiny {
+            return xn;
+        }
+        x = xn;
+    }
+    x
+}
+
 /// Bracketed root of `f` on [lo, hi] (Illinois variant of regula falsi), assuming
 /// f(lo) ≤ 0 ≤ f(hi) or the reverse. Returns the best point after convergence to
 /// machine precision or 200 iterations.
