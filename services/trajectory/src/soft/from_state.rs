@@ -89,24 +89,94 @@ pub fn time_optimal(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Phases {
 /// towards +) at which its acceleration crosses zero, when it does: the anchor of
 /// the stretch family ([`super::stretch::Stretch::with_anchor`]).
 pub fn time_optimal_peak(v0: f64, a0: f64, d: f64, lim: &Limits1) -> (Phases, Option<f64>) {
-    let (ph, peak, _) = time_optimal_with_brake_point(v0, a0, d, lim);
-    (ph, peak)
+    let o = optimal(v0, a0, d, lim);
+    (o.phases(lim), o.anchor)
 }
 
-/// [`time_optimal_peak`], plus the brake point of (v0, a0) (relative to the start).
-pub(crate) fn time_optimal_with_brake_point(
+/// The time-optimal motion from (v0, a0) to rest at `d`, solved but not yet written
+/// as phases: synchronisation needs every joint's duration but the phases of the
+/// slowest joint only (the others are stretched).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Optimal {
+    /// Duration (s).
+    pub duration: f64,
+    /// Peak velocity anchoring the stretch family (see [`time_optimal_peak`]).
+    pub anchor: Option<f64>,
+    /// Brake point of (v0, a0), relative to the start (original frame).
+    pub pb: f64,
+    /// +1 when the motion goes towards + (d ≥ pb), else −1; v0, a0, d in that frame.
+    sg: f64,
     v0: f64,
     a0: f64,
     d: f64,
-    lim: &Limits1,
-) -> (Phases, Option<f64>, f64) {
+    /// Push duration, or `None` for the profile that cruises at vmax.
+    tau: Option<f64>,
+}
+
+/// Solves the time-optimal motion (see [`Optimal`]).
+pub(crate) fn optimal(v0: f64, a0: f64, d: f64, lim: &Limits1) -> Optimal {
     let pb = brake_point(v0, a0, lim);
     let sg = if d >= pb { 1.0 } else { -1.0 };
-    let (mut ph, peak) = positive(sg * v0, sg * a0, sg * d, sg * pb, lim);
-    for p in &mut ph.p[..ph.n] {
-        p.j *= sg;
+    let (v0, a0, d, pbs) = (sg * v0, sg * a0, sg * d, sg * pb);
+    let start = Kin {
+        p: 0.0,
+        v: v0,
+        a: a0,
+    };
+    let tmax = tau_max(v0, a0, lim);
+    let p_max = push_then_stop_end(v0, a0, tmax, lim);
+    let (duration, anchor, tau) = if d >= p_max {
+        // Reach vmax, cruise, stop.
+        let r1 = ramp(v0, a0, lim.v, lim);
+        let k = r1.integrate(start);
+        let r2 = ramp(lim.v, 0.0, 0.0, lim);
+        let end = r2.integrate(Kin { a: 0.0, ..k });
+        let cruise = ((d - end.p) / lim.v).max(0.0);
+        (r1.duration() + cruise + r2.duration(), Some(lim.v), None)
+    } else {
+        let tau = push_duration(v0, a0, d, pbs, tmax, p_max, lim);
+        let k = push(a0, tau, lim).integrate(start);
+        let peak = (k.a >= 0.0).then(|| k.v + k.a * k.a / (2.0 * lim.j));
+        (tau + ramp(k.v, k.a, 0.0, lim).duration(), peak, Some(tau))
+    };
+    Optimal {
+        duration,
+        anchor,
+        pb,
+        sg,
+        v0,
+        a0,
+        d,
+        tau,
     }
-    (ph, peak, pb)
+}
+
+impl Optimal {
+    /// The motion's phases (original frame).
+    pub(crate) fn phases(&self, lim: &Limits1) -> Phases {
+        let (v0, a0, d) = (self.v0, self.a0, self.d);
+        let mut ph = match self.tau {
+            None => {
+                let start = Kin {
+                    p: 0.0,
+                    v: v0,
+                    a: a0,
+                };
+                let mut ph = velocity_change(v0, a0, lim.v, lim);
+                let k = ph.integrate(start);
+                let stop = velocity_change(lim.v, 0.0, 0.0, lim);
+                let end = stop.integrate(Kin { a: 0.0, ..k });
+                ph.push((d - end.p) / lim.v, 0.0);
+                ph.extend(&stop);
+                ph
+            }
+            Some(tau) => push_then_stop(v0, a0, tau, lim).0,
+        };
+        for p in &mut ph.p[..ph.n] {
+            p.j *= self.sg;
+        }
+        ph
+    }
 }
 
 /// Push duration at which the stop velocity of the pushed state reaches 0 (positive
@@ -188,42 +258,15 @@ fn end_and_slope(v0: f64, a0: f64, tau: f64, lim: &Limits1) -> (f64, f64, f64) {
     }
 }
 
-/// Positive-frame solution (d ≥ brake point `pb`, which is the end of τ = 0).
-///
-/// The end position e(τ) of "push τ, then stop" is constant (= pb) up to
-/// [`tau_zero`], then strictly increasing and smooth except at τ = (amax − a₀)/J where
-/// the push starts holding amax. The root of e(τ) = d is taken by safeguarded Newton
-/// steps with the exact slope ([`end_and_slope`]) on the smooth piece that holds it,
-/// from the secant point of that piece: Ruckig's UDDU NONE/ACC0/ACC1/ACC0_ACC1 cases
-/// (for rest targets), one monotone function instead of four quartics.
-fn positive(v0: f64, a0: f64, d: f64, pb: f64, lim: &Limits1) -> (Phases, Option<f64>) {
-    let tmax = tau_max(v0, a0, lim);
-    let p_max = push_then_stop_end(v0, a0, tmax, lim);
-    if d >= p_max {
-        // Reach vmax, cruise, stop.
-        let start = Kin {
-            p: 0.0,
-            v: v0,
-            a: a0,
-        };
-        let mut ph = velocity_change(v0, a0, lim.v, lim);
-        let k = ph.integrate(start);
-        let stop = velocity_change(lim.v, 0.0, 0.0, lim);
-        let end = stop.integrate(Kin { a: 0.0, ..k });
-        ph.push((d - end.p) / lim.v, 0.0);
-        ph.extend(&stop);
-        (ph, Some(lim.v))
-    } else {
-        let tau = push_duration(v0, a0, d, pb, tmax, p_max, lim);
-        let k = push(a0, tau, lim).integrate(Kin {
-            p: 0.0,
-            v: v0,
-            a: a0,
-        });
-        let peak = (k.a >= 0.0).then(|| k.v + k.a * k.a / (2.0 * lim.j));
-        (push_then_stop(v0, a0, tau, lim).0, peak)
-    }
-}
+// The positive frame (d ≥ brake point pb, the end of τ = 0): the end position e(τ)
+// of "push τ, then stop" is constant (= pb) up to [`tau_zero`], then strictly
+// increasing and smooth except at τ = (amax − a₀)/J where the push starts holding
+// amax. Beyond e(tmax) the profile cruises at vmax (closed form). Below it the root
+// of e(τ) = d is taken by safeguarded steps to the root of the local quadratic model
+// ([`end_and_slope`] gives e, e', e'' exactly) on the smooth piece that holds it, from
+// the secant point of that piece — Ruckig's UDDU NONE/ACC0/ACC1 cases (for rest
+// targets) as one monotone function instead of three quartics; ACC0_ACC1 (both amax
+// holds) in closed form.
 
 /// The push duration τ ∈ [tau_zero, tmax] whose "push, then stop" ends at `d`, given
 /// e(0) = pb ≤ d < e(tmax) = p_max.
