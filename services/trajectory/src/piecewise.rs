@@ -293,14 +293,19 @@ impl Piecewise {
             hi = hi.max(c0);
             let v_end = self.c[i + 1][1];
             let len = self.end[i] - self.t0[i];
-            // Vertex of v (where the acceleration 2c2 + 6c3·x crosses zero).
-            let xv = if c3 != 0.0 { -c2 / (3.0 * c3) } else { -1.0 };
-            let inside = xv > 0.0 && xv < len;
-            let vv = c1 + xv * (2.0 * c2 + xv * 3.0 * c3);
-            let one_sign = (c1 >= 0.0 && v_end >= 0.0 && (!inside || vv >= 0.0))
-                || (c1 <= 0.0 && v_end <= 0.0 && (!inside || vv <= 0.0));
-            if one_sign {
-                continue;
+            let (up, down) = (c1 >= 0.0 && v_end >= 0.0, c1 <= 0.0 && v_end <= 0.0);
+            if up || down {
+                // One sign at both ends: v can only change sign around its vertex,
+                // which lies inside when the acceleration changes sign in the piece.
+                let a_end = c2 + 3.0 * c3 * len;
+                if c2 * a_end >= 0.0 {
+                    continue;
+                }
+                let xv = -c2 / (3.0 * c3);
+                let vv = c1 + xv * (2.0 * c2 + xv * 3.0 * c3);
+                if (up && vv >= 0.0) || (down && vv <= 0.0) {
+                    continue;
+                }
             }
             // Roots of 3c3·x² + 2c2·x + c1 in (0, len), by the stable quadratic formula.
             let (a, b) = (3.0 * c3, 2.0 * c2);

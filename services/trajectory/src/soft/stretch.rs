@@ -13,7 +13,7 @@
 
 use super::from_state::brake_point;
 use super::velocity::{ramp, ramp_from_rest, velocity_change};
-use super::{Kin, Limits1, Phases, newton_increasing, rest_to_rest, solve_tol, stop_velocity};
+use super::{Kin, Limits1, Phases, newton_increasing, rest_to_rest, stop_velocity};
 
 /// Prepared stretch problem for one joint (positive frame).
 #[derive(Debug, Clone, Copy)]
@@ -74,18 +74,48 @@ impl Stretch {
         }
         let sg = if d >= pb { 1.0 } else { -1.0 };
         let (v, a, dd) = (sg * v0, sg * a0, sg * d);
+        // Zero-cruise distance D(vp) = D1 + D2 and its slope
+        // D' = vp·(T1' + T2') + (a1 + a2)/(2J) (see [`Stretch::eval`]).
         let dist = |vp: f64| {
             let r1 = ramp(v, a, vp, lim);
             let k = r1.integrate(Kin { p: 0.0, v, a });
-            let (_, _, d2) = ramp_from_rest(vp, lim);
-            k.p + d2
+            let (t1, t2, d2) = ramp_from_rest(vp, lim);
+            let s1 = r1.j.signum();
+            let dt1 = if r1.t[1] > 0.0 {
+                s1 / lim.a
+            } else {
+                s1 / (r1.t[2] * lim.j)
+            };
+            let dt2 = if t2 > 0.0 {
+                1.0 / lim.a
+            } else {
+                1.0 / (t1 * lim.j)
+            };
+            (k.p + d2, vp * (dt1 + dt2) + 0.5 * (r1.t[2] + t1))
         };
         let vp_hi = if let Some(vp) = anchor {
             vp.clamp(0.0, lim.v)
-        } else if dd >= dist(lim.v) {
+        } else if dd >= dist(lim.v).0 {
             lim.v
         } else {
-            solve_tol(|vp| dist(vp) - dd, 0.0, lim.v, 1e-14 * (1.0 + dd.abs()))
+            // D increases above the stop velocity m: the largest root lies there when
+            // D(m) ≤ d; otherwise take a root below m (D may rise and fall there).
+            let m = stop_velocity(v, a, lim.j).clamp(0.0, lim.v);
+            let (lo, hi) = if dist(m).0 <= dd {
+                (m, lim.v)
+            } else {
+                (0.0, m)
+            };
+            newton_increasing(
+                |vp| {
+                    let (x, dx) = dist(vp);
+                    (x - dd, dx)
+                },
+                lo,
+                hi,
+                0.5 * (lo + hi),
+                1e-14 * (1.0 + dd.abs()),
+            )
         };
         Self {
             sg,
@@ -451,6 +481,45 @@ mod tests {
         );
         let (fx, ok) = g(vp);
         (ok && fx.abs() <= 1e-9 * (1.0 + st.d.abs())).then_some(vp)
+    }
+
+    /// Without an anchor, the top of the search is a zero-cruise member: D(vp_hi) = d
+    /// (or vmax when even that falls short), and no larger root exists above the
+    /// stop velocity.
+    #[test]
+    fn unanchored_top_is_a_zero_cruise_member() {
+        let mut r = Lcg(21);
+        for n in 0..4000 {
+            let (v0, a0, d, lim) = case(&mut r);
+            let st = Stretch::new(v0, a0, d, &lim);
+            if st.rest {
+                continue;
+            }
+            let dist = |vp: f64| {
+                let r1 = ramp(st.v0, st.a0, vp, &lim);
+                let k = r1.integrate(Kin {
+                    p: 0.0,
+                    v: st.v0,
+                    a: st.a0,
+                });
+                k.p + ramp_from_rest(vp, &lim).2
+            };
+            if st.vp_hi < lim.v {
+                let got = dist(st.vp_hi);
+                assert!(
+                    (got - st.d).abs() <= 1e-10 * (1.0 + st.d.abs()),
+                    "case {n}: D(vp_hi) {got} vs {}",
+                    st.d
+                );
+                // Above the stop velocity D increases: nothing above vp_hi reaches d.
+                let m = stop_velocity(st.v0, st.a0, lim.j).clamp(0.0, lim.v);
+                if st.vp_hi >= m {
+                    assert!(dist(0.5 * (st.vp_hi + lim.v)) >= st.d);
+                }
+            } else {
+                assert!(dist(lim.v) <= st.d * (1.0 + 1e-12) + 1e-12);
+            }
+        }
     }
 
     /// f' and f'' of `eval` are the derivatives of f (central differences away from
