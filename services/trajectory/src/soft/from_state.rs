@@ -277,38 +277,47 @@ fn push_duration(v0: f64, a0: f64, d: f64, pb: f64, tmax: f64, p_max: f64, lim: 
     if flo >= 0.0 {
         return lo;
     }
+    let (am, jm) = (lim.a, lim.j);
+    let t_a = ((am - a0) / jm).max(0.0);
+    if t_a < hi {
+        // Holding +amax. Once the pushed velocity v₁ reaches c = A²/(2J) the stop holds
+        // −amax too (Ruckig's ACC0_ACC1) and the end position is quadratic in v₁:
+        // e − d = Q(v₁) = v₁²/A + 2A v₁/J + K, K = p_a − (v_a² + c²)/(2A) + 5A³/(6J²) − d,
+        // (p_a, v_a) the state when the hold starts. Q increases for v₁ > 0, so its
+        // root is e's root whenever it falls in that piece [t_c, tmax]; tried first.
+        let ka = Kin {
+            p: 0.0,
+            v: v0,
+            a: a0,
+        }
+        .advance(t_a, jm);
+        let c = am * am / (2.0 * jm);
+        let t_c = t_a + ((c - ka.v) / am).max(0.0);
+        if t_c < hi {
+            let k = ka.p - (ka.v * ka.v + c * c) / (2.0 * am)
+                + 5.0 * am * am * am / (6.0 * jm * jm)
+                - d;
+            let b = am * am / jm;
+            let v1 = (b * b - am * k).sqrt() - b;
+            let tau = t_a + (v1 - ka.v) / am;
+            if tau >= t_c.max(lo) {
+                return tau.min(hi);
+            }
+            // Below t_c: e(t_c) − d = Q(v(t_c)) > 0 bounds the root from above.
+            let vc = ka.v.max(c);
+            let f_c = vc * vc / am + 2.0 * am * vc / jm + k;
+            if t_c > lo && f_c > 0.0 {
+                (hi, fhi) = (t_c, f_c);
+            }
+        }
+    }
     // Keep to the smooth piece: below or above the start of the amax hold.
-    let t_a = (lim.a - a0) / lim.j;
     if t_a > lo && t_a < hi {
         let f_a = push_then_stop_end(v0, a0, t_a, lim) - d;
         if f_a >= 0.0 {
             (hi, fhi) = (t_a, f_a);
         } else {
             (lo, flo) = (t_a, f_a);
-        }
-    }
-    if lo >= t_a {
-        // Holding +amax. Once the pushed velocity v₁ reaches A²/(2J) the stop holds
-        // −amax too (Ruckig's ACC0_ACC1) and the end position is quadratic in v₁:
-        // e = p_a + (v₁² − v_a²)/(2A) + 2A v₁/J + 5A³/(6J²) + (v₁² − c²)/(2A),
-        // c = A²/(2J), (p_a, v_a) the state when the hold starts.
-        let (am, jm) = (lim.a, lim.j);
-        let ka = Kin {
-            p: 0.0,
-            v: v0,
-            a: a0,
-        }
-        .advance(t_a.max(0.0), jm);
-        let c = am * am / (2.0 * jm);
-        let t_c = t_a.max(0.0) + ((c - ka.v) / am).max(0.0);
-        let in_acc1 = t_c <= lo || (t_c < hi && push_then_stop_end(v0, a0, t_c, lim) <= d);
-        if in_acc1 {
-            let k = ka.p - (ka.v * ka.v + c * c) / (2.0 * am)
-                + 5.0 * am * am * am / (6.0 * jm * jm)
-                - d;
-            let b = am * am / jm;
-            let v1 = (b * b - am * k).max(0.0).sqrt() - b;
-            return (t_a.max(0.0) + (v1 - ka.v) / am).clamp(lo, hi);
         }
     }
     let x0 = (lo * fhi - hi * flo) / (fhi - flo);
