@@ -17,7 +17,10 @@ pub fn tau_max(v0: f64, a0: f64, lim: &Limits1) -> f64 {
     let (vm, am, jm) = (lim.v, lim.a, lim.j);
     let s0 = stop_velocity(v0, a0, jm);
     if s0 >= vm {
-        return 0.0;
+        // At the velocity limit already (e.g. right after a brake pre-phase, with
+        // v > vmax and a < 0): pushing while a < 0 leaves the stop velocity where it
+        // is, so the push may still last until a = 0 — the start of the cruise.
+        return (-a0 / jm).max(0.0);
     }
     let a0p = a0.max(0.0);
     let s_a = s0 + (am * am - a0p * a0p) / jm;
