@@ -74,22 +74,26 @@ impl Trajectory {
     fn plan_inner(&mut self, req: &MotionRequest) -> Result<(), TrajectoryError> {
         let dof = req.dof;
         validate::dof(dof)?;
-        validate::limits(dof, &req.limits)?;
         let soft = matches!(req.profile, Profile::Soft { .. });
-        validate::state(
-            dof,
-            &req.start,
-            &req.limits,
-            ["start.q", "start.qd", "start.qdd"],
-            soft,
-        )?;
-        validate::state(
-            dof,
-            &req.target,
-            &req.limits,
-            ["target.q", "target.qd", "target.qdd"],
-            false,
-        )?;
+        // One branch-free pass over everything; the field-by-field checks (which name
+        // the first bad joint and field) run only when it finds a problem.
+        if !validate::all_ok(dof, &req.limits, &req.start, &req.target, soft) {
+            validate::limits(dof, &req.limits)?;
+            validate::state(
+                dof,
+                &req.start,
+                &req.limits,
+                ["start.q", "start.qd", "start.qdd"],
+                soft,
+            )?;
+            validate::state(
+                dof,
+                &req.target,
+                &req.limits,
+                ["target.q", "target.qd", "target.qdd"],
+                false,
+            )?;
+        }
         let (s, g) = (&req.start, &req.target);
         let joints = &mut self.joints;
         let mut braked = false;
