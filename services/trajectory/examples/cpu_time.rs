@@ -7,9 +7,11 @@
 //!
 //! Means: `clock_gettime(CLOCK_THREAD_CPUTIME_ID)` around 10⁵–10⁷ calls, so time the
 //! machine spends on other processes is not charged. Distribution: each problem is
-//! planned 8 times in a row and its mean thread CPU time per plan recorded (the
-//! syscall's ~0.3 µs is amortised, the repeats run with warm caches and branch
-//! predictors); p50/p99/max are over problems.
+//! planned in 3 rounds of 8 plans in a row, and the mean thread CPU time per plan of
+//! its first round and of its best round are recorded (the syscall's ~0.3 µs is
+//! amortised, the repeats run with warm caches and branch predictors); p50/p99/max
+//! are over problems. On a loaded shared machine the first-round tail is mostly
+//! interference: the slowest 1 % of two runs share ~15 % of their problems.
 
 #![allow(clippy::needless_range_loop)]
 
@@ -97,28 +99,47 @@ fn main() {
     println!("  trajectory/generator_update_6   {:8.1} ns", gen_ns);
 
     let many = common::random_from_state(n_problems);
-    let mut per = Vec::with_capacity(many.len());
+    // Per problem: ROUNDS rounds of REPS plans each. The first round alone is the old
+    // figure; the best round filters the shared machine's interference (preemption,
+    // the SMT sibling, cache pollution), which lands in a different 1 % of the
+    // problems on every run.
     const REPS: usize = 8;
+    const ROUNDS: usize = 3;
+    let mut first = Vec::with_capacity(many.len());
+    let mut best = Vec::with_capacity(many.len());
     for req in &many {
-        let t0 = cpu_ns();
-        for _ in 0..REPS {
-            black_box(out.plan_into(black_box(req))).expect("plans");
+        let mut b = f64::INFINITY;
+        for r in 0..ROUNDS {
+            let t0 = cpu_ns();
+            for _ in 0..REPS {
+                black_box(out.plan_into(black_box(req))).expect("plans");
+            }
+            let x = (cpu_ns() - t0) / REPS as f64;
+            if r == 0 {
+                first.push(x);
+            }
+            b = b.min(x);
         }
-        per.push((cpu_ns() - t0) / REPS as f64);
+        best.push(b);
     }
-    per.sort_by(f64::total_cmp);
-    let q = |p: f64| per[((per.len() - 1) as f64 * p).round() as usize];
-    let mean = per.iter().sum::<f64>() / per.len() as f64;
-    println!(
-        "plan_from_state_6 over {} random problems (thread CPU, mean of {REPS} repeats each):",
-        per.len()
-    );
-    println!(
-        "  mean {:.2} µs  p50 {:.2} µs  p99 {:.2} µs  p99.9 {:.2} µs  max {:.2} µs",
-        mean / 1e3,
-        q(0.5) / 1e3,
-        q(0.99) / 1e3,
-        q(0.999) / 1e3,
-        per[per.len() - 1] / 1e3
-    );
+    for (name, per) in [
+        ("mean of the first round of", &mut first),
+        ("mean of the best of 3 rounds of", &mut best),
+    ] {
+        per.sort_by(f64::total_cmp);
+        let q = |p: f64| per[((per.len() - 1) as f64 * p).round() as usize];
+        let mean = per.iter().sum::<f64>() / per.len() as f64;
+        println!(
+            "plan_from_state_6 over {} random problems (thread CPU, {name} {REPS} plans each):",
+            per.len()
+        );
+        println!(
+            "  mean {:.2} µs  p50 {:.2} µs  p99 {:.2} µs  p99.9 {:.2} µs  max {:.2} µs",
+            mean / 1e3,
+            q(0.5) / 1e3,
+            q(0.99) / 1e3,
+            q(0.999) / 1e3,
+            per[per.len() - 1] / 1e3
+        );
+    }
 }

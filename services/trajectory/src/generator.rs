@@ -1,7 +1,7 @@
 //! Per-cycle wrapper around a [`Trajectory`], shaped like Ruckig's `update()`: the
 //! planner loop steps it every cycle and does not care which profile runs.
 
-use crate::{MAX_JOINTS, Sample, Trajectory};
+use crate::{Sample, Trajectory};
 
 /// Whether the motion is still running after this cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -18,18 +18,12 @@ pub enum Status {
 pub struct Generator {
     trajectory: Trajectory,
     t: f64,
-    /// Per-joint piece of the last sample (sampling is O(1) per cycle).
-    hints: [usize; MAX_JOINTS],
 }
 
 impl Generator {
     /// Starts `trajectory` at time 0.
     pub fn new(trajectory: Trajectory) -> Self {
-        Self {
-            trajectory,
-            t: 0.0,
-            hints: [0; MAX_JOINTS],
-        }
+        Self { trajectory, t: 0.0 }
     }
 
     /// Advances by `dt` seconds and returns the new sample.
@@ -42,7 +36,7 @@ impl Generator {
     #[inline]
     pub fn at(&mut self, t: f64) -> (Status, Sample) {
         self.t = t;
-        let s = self.trajectory.sample_from(t, &mut self.hints);
+        let s = self.trajectory.sample(t);
         let status = if t >= self.trajectory.duration() {
             Status::Finished
         } else {
@@ -61,7 +55,6 @@ impl Generator {
     pub fn replace(&mut self, trajectory: Trajectory) {
         self.trajectory = trajectory;
         self.t = 0.0;
-        self.hints = [0; MAX_JOINTS];
     }
 
     /// Time since the start of the current trajectory.

@@ -21,6 +21,11 @@ struct JointWork {
     t_opt: f64,
     /// Peak velocity of the optimal motion, anchoring its stretch.
     anchor: Option<f64>,
+    /// Brake point of `after`, relative to it.
+    pb: f64,
+    /// The solved optimum (its phases are written only if the joint is not
+    /// stretched); `None` when `after` is at rest (closed form).
+    opt: Option<from_state::Optimal>,
 }
 
 /// Every joint starts at rest: closed forms only (no brake, no blocked intervals,
@@ -122,34 +127,36 @@ pub(crate) fn plan_soft(
     };
     for i in 0..dof {
         let lim = limits1(limits, i);
-        let mut ph = brake(k0(i), &lim);
+        let ph = brake(k0(i), &lim);
         braked |= ph.n > 0;
         let t_brake = ph.duration();
         let after = ph.integrate(k0(i));
         let d = target_q[i] - after.p;
-        let (opt, anchor) = if after.v == 0.0 && after.a == 0.0 {
-            let mut r = rest_to_rest::time_optimal(d.abs(), &lim);
-            if d < 0.0 {
-                for p in &mut r.p[..r.n] {
-                    p.j = -p.j;
-                }
+        work[i] = if after.v == 0.0 && after.a == 0.0 {
+            JointWork {
+                after,
+                t_brake,
+                t_opt: t_brake + rest_to_rest::time_optimal_duration(d.abs(), &lim),
+                anchor: None,
+                pb: 0.0,
+                opt: None,
             }
-            (r, None)
         } else {
-            from_state::time_optimal_peak(after.v, after.a, d, &lim)
-        };
-        ph.extend(&opt);
-        plans[i] = ph;
-        work[i] = JointWork {
-            after,
-            t_brake,
-            t_opt: t_brake + opt.duration(),
-            anchor,
+            let o = from_state::optimal(after.v, after.a, d, &lim);
+            JointWork {
+                after,
+                t_brake,
+                t_opt: t_brake + o.duration,
+                anchor: o.anchor,
+                pb: o.pb,
+                opt: Some(o),
+            }
         };
         t_sync = t_sync.max(work[i].t_opt);
     }
     // Stretch the others; raise T past blocked intervals until every joint reaches it.
     let mut stretches: [Option<Stretch>; MAX_JOINTS] = [None; MAX_JOINTS];
+    let mut stretched = [false; MAX_JOINTS];
     let eps = |t: f64| 1e-12 * t.max(1.0);
     for _ in 0..=dof + 1 {
         let mut raise = t_sync;
@@ -160,12 +167,13 @@ pub(crate) fn plan_soft(
             }
             let lim = limits1(limits, i);
             let st = *stretches[i].get_or_insert_with(|| {
-                Stretch::with_anchor(
+                Stretch::prepared(
                     w.after.v,
                     w.after.a,
                     target_q[i] - w.after.p,
                     &lim,
                     w.anchor,
+                    w.pb,
                 )
             });
             match st.phases(t_sync - w.t_brake, &lim) {
@@ -173,6 +181,7 @@ pub(crate) fn plan_soft(
                     let mut ph = brake(k0(i), &lim);
                     ph.extend(&main);
                     plans[i] = ph;
+                    stretched[i] = true;
                 }
                 None => raise = raise.max(w.t_brake + st.guaranteed()),
             }
@@ -181,6 +190,30 @@ pub(crate) fn plan_soft(
             break;
         }
         t_sync = raise;
+    }
+    // The joints that set T move time-optimally: their phases are written now.
+    for i in 0..dof {
+        if stretched[i] {
+            continue;
+        }
+        let lim = limits1(limits, i);
+        let mut ph = brake(k0(i), &lim);
+        let w = &work[i];
+        let opt = match &w.opt {
+            Some(o) => o.phases(&lim),
+            None => {
+                let d = target_q[i] - w.after.p;
+                let mut r = rest_to_rest::time_optimal(d.abs(), &lim);
+                if d < 0.0 {
+                    for p in &mut r.p[..r.n] {
+                        p.j = -p.j;
+                    }
+                }
+                r
+            }
+        };
+        ph.extend(&opt);
+        plans[i] = ph;
     }
     let starts: [Kin; MAX_JOINTS] = std::array::from_fn(k0);
     let fins: [Kin; MAX_JOINTS] = std::array::from_fn(fin);

@@ -13,6 +13,8 @@ pub struct Trajectory {
     dof: usize,
     duration: f64,
     braked: bool,
+    /// Some joint's first piece is a quintic (degree 5): sampling takes the general path.
+    quintic: bool,
     joints: [Piecewise; MAX_JOINTS],
 }
 
@@ -52,6 +54,7 @@ impl Trajectory {
             dof: 0,
             duration: 0.0,
             braked: false,
+            quintic: false,
             joints: [Piecewise::hold(0.0); MAX_JOINTS],
         }
     }
@@ -71,22 +74,26 @@ impl Trajectory {
     fn plan_inner(&mut self, req: &MotionRequest) -> Result<(), TrajectoryError> {
         let dof = req.dof;
         validate::dof(dof)?;
-        validate::limits(dof, &req.limits)?;
         let soft = matches!(req.profile, Profile::Soft { .. });
-        validate::state(
-            dof,
-            &req.start,
-            &req.limits,
-            ["start.q", "start.qd", "start.qdd"],
-            soft,
-        )?;
-        validate::state(
-            dof,
-            &req.target,
-            &req.limits,
-            ["target.q", "target.qd", "target.qdd"],
-            false,
-        )?;
+        // One branch-free pass over everything; the field-by-field checks (which name
+        // the first bad joint and field) run only when it finds a problem.
+        if !validate::all_ok(dof, &req.limits, &req.start, &req.target, soft) {
+            validate::limits(dof, &req.limits)?;
+            validate::state(
+                dof,
+                &req.start,
+                &req.limits,
+                ["start.q", "start.qd", "start.qdd"],
+                soft,
+            )?;
+            validate::state(
+                dof,
+                &req.target,
+                &req.limits,
+                ["target.q", "target.qd", "target.qdd"],
+                false,
+            )?;
+        }
         let (s, g) = (&req.start, &req.target);
         let joints = &mut self.joints;
         let mut braked = false;
@@ -174,6 +181,7 @@ impl Trajectory {
         self.dof = dof;
         self.duration = duration;
         self.braked = braked;
+        self.quintic = self.joints[..dof].iter().any(Piecewise::is_quintic);
         if monotone {
             return Ok(());
         }
@@ -192,6 +200,7 @@ impl Trajectory {
             dof,
             duration: 0.0,
             braked: false,
+            quintic: false,
             joints,
         })
     }
@@ -206,6 +215,9 @@ impl Trajectory {
             dof,
             duration,
             braked,
+            quintic: joints[..dof.min(MAX_JOINTS)]
+                .iter()
+                .any(Piecewise::is_quintic),
             joints,
         }
     }
@@ -227,18 +239,10 @@ impl Trajectory {
 
     /// Position, velocity, acceleration and jerk of every joint at time `t` (s).
     /// Before 0: the start state; from the end on: the final state with zero jerk.
-    /// Allocation-free.
+    /// Allocation-free, division-free: per joint a branch-free binary search over its
+    /// piece ends and one cubic Horner evaluation.
     #[inline]
     pub fn sample(&self, t: f64) -> Sample {
-        let mut hints = [0; MAX_JOINTS];
-        self.sample_from(t, &mut hints)
-    }
-
-    /// [`Trajectory::sample`] with per-joint piece hints carried between calls (what
-    /// [`crate::Generator`] does): each joint's piece search starts where the previous
-    /// sample found it. Start with zeros; any values are safe.
-    #[inline]
-    pub fn sample_from(&self, t: f64, hints: &mut [usize; MAX_JOINTS]) -> Sample {
         // Written in place (the 256-byte Sample is returned without extra copies).
         let mut out = Sample::default();
         let n = self.dof.min(MAX_JOINTS);
@@ -253,16 +257,23 @@ impl Trajectory {
                 qd[i] = f.v;
                 qdd[i] = f.a;
             }
+        } else if self.quintic {
+            for (i, pw) in joints.iter().enumerate() {
+                [q[i], qd[i], qdd[i], jerk[i]] = pw.eval(t);
+            }
         } else {
-            for (i, (pw, hint)) in joints.iter().zip(hints.iter_mut()).enumerate() {
-                let [a, b, c, d] = pw.eval_from(t, hint);
-                q[i] = a;
-                qd[i] = b;
-                qdd[i] = c;
-                jerk[i] = d;
+            for (i, pw) in joints.iter().enumerate() {
+                [q[i], qd[i], qdd[i], jerk[i]] = pw.eval_cubic(t);
             }
         }
         out
+    }
+
+    /// [`Trajectory::sample`]. The per-joint piece hints are no longer needed (the
+    /// piece search is branch-free); they are accepted and left as they are.
+    #[inline]
+    pub fn sample_from(&self, t: f64, _hints: &mut [usize; MAX_JOINTS]) -> Sample {
+        self.sample(t)
     }
 
     /// Peak values per joint (computed on demand; not for the hot path).

@@ -128,3 +128,94 @@ pub(crate) fn state(
     }
     Ok(())
 }
+
+/// True when [`limits`] and [`state`] (start with `check_dynamics`, target without)
+/// would all pass: the same conditions, evaluated without early exits (NaN fails every
+/// comparison). A fast path only: on `false` the callers run the checks that name the
+/// joint and field.
+pub(crate) fn all_ok(
+    dof: usize,
+    l: &KinematicLimits,
+    start: &JointState,
+    target: &JointState,
+    check_dynamics: bool,
+) -> bool {
+    let mut ok = dof <= MAX_JOINTS;
+    for i in 0..dof.min(MAX_JOINTS) {
+        let (v, a, j) = (l.velocity[i], l.acceleration[i], l.jerk[i]);
+        let (lo, hi) = (l.position_min[i], l.position_max[i]);
+        ok &= (v > 0.0) & (a > 0.0) & (j > 0.0);
+        ok &= v.is_finite() & a.is_finite() & j.is_finite() & lo.is_finite() & hi.is_finite();
+        ok &= lo <= hi;
+        let tol = LIMIT_TOL * (hi - lo).abs().max(1.0);
+        for s in [start, target] {
+            ok &= (s.q[i] >= lo - tol) & (s.q[i] <= hi + tol);
+            ok &= s.qd[i].is_finite() & s.qdd[i].is_finite();
+        }
+        if check_dynamics {
+            ok &= start.qd[i].abs() <= v * (1.0 + LIMIT_TOL);
+            ok &= start.qdd[i].abs() <= a * (1.0 + LIMIT_TOL);
+        }
+    }
+    ok
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The fast path agrees with the field-by-field checks on requests with one value
+    /// replaced by something bad or borderline.
+    #[test]
+    fn all_ok_agrees_with_the_detailed_checks() {
+        let bad = [
+            f64::NAN,
+            f64::INFINITY,
+            -f64::INFINITY,
+            0.0,
+            -1.0,
+            1e9,
+            1.0 + 1e-12,
+            2.0,
+        ];
+        let base_l = KinematicLimits::uniform(1.0, 2.0, 3.0, -1.0, 1.0);
+        let base_s = JointState {
+            q: crate::JointVector::repeat(0.5),
+            qd: crate::JointVector::repeat(0.5),
+            qdd: crate::JointVector::repeat(-1.0),
+        };
+        let mut n = 0;
+        for field in 0..11 {
+            for &x in &bad {
+                for joint in [0, 3] {
+                    for dynamics in [false, true] {
+                        let (mut l, mut s, mut t) = (base_l, base_s, base_s);
+                        match field {
+                            0 => l.velocity[joint] = x,
+                            1 => l.acceleration[joint] = x,
+                            2 => l.jerk[joint] = x,
+                            3 => l.position_min[joint] = x,
+                            4 => l.position_max[joint] = x,
+                            5 => s.q[joint] = x,
+                            6 => s.qd[joint] = x,
+                            7 => s.qdd[joint] = x,
+                            8 => t.q[joint] = x,
+                            9 => t.qd[joint] = x,
+                            _ => t.qdd[joint] = x,
+                        }
+                        let detailed = limits(4, &l).is_ok()
+                            && state(4, &s, &l, ["s.q", "s.qd", "s.qdd"], dynamics).is_ok()
+                            && state(4, &t, &l, ["t.q", "t.qd", "t.qdd"], false).is_ok();
+                        assert_eq!(
+                            all_ok(4, &l, &s, &t, dynamics),
+                            detailed,
+                            "field {field} = {x} on joint {joint}, dynamics {dynamics}"
+                        );
+                        n += usize::from(!detailed);
+                    }
+                }
+            }
+        }
+        assert!(n > 100, "only {n} bad requests");
+    }
+}

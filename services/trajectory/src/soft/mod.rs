@@ -43,6 +43,95 @@ pub fn stop_velocity(v: f64, a: f64, j: f64) -> f64 {
     v + a * a.abs() / (2.0 * j)
 }
 
+/// Root of an increasing function on the bracket [lo, hi] (f(lo) ≤ 0 ≤ f(hi)) by
+/// Newton's method from `x0`, with `f` returning the value and the exact derivative.
+/// Safeguarded: every evaluation shrinks the bracket, and a step that would leave it
+/// (or a zero or non-finite slope) bisects instead, so it converges like bisection at
+/// worst and quadratically near a simple root. Stops once |f| ≤ `ftol` (the caller's
+/// round-off level of f) or a step falls below a few ulps of the bracket's scale.
+#[inline]
+pub(crate) fn newton_increasing(
+    mut f: impl FnMut(f64) -> (f64, f64),
+    mut lo: f64,
+    mut hi: f64,
+    x0: f64,
+    ftol: f64,
+) -> f64 {
+    let tiny = 4.0 * f64::EPSILON * lo.abs().max(hi.abs()).max(f64::MIN_POSITIVE);
+    let mut x = if x0 > lo && x0 < hi {
+        x0
+    } else {
+        0.5 * (lo + hi)
+    };
+    for _ in 0..100 {
+        let (fx, dfx) = f(x);
+        if fx.abs() <= ftol {
+            return x;
+        }
+        if fx < 0.0 {
+            lo = x;
+        } else {
+            hi = x;
+        }
+        let mut xn = x - fx / dfx;
+        if !(xn >= lo && xn <= hi) {
+            xn = 0.5 * (lo + hi);
+        }
+        if (xn - x).abs() <= tiny || hi - lo <= tiny {
+            return xn;
+        }
+        x = xn;
+    }
+    x
+}
+
+/// [`newton_increasing`] with the second derivative too (`f` returns f, f', f''):
+/// each step goes to the root of the local quadratic model nearest x (cubically
+/// convergent; exact for a quadratic f), a Newton step where the model has no real
+/// root, a bisection where the step would leave the bracket.
+#[inline]
+pub(crate) fn model_root_increasing(
+    mut f: impl FnMut(f64) -> (f64, f64, f64),
+    mut lo: f64,
+    mut hi: f64,
+    x0: f64,
+    ftol: f64,
+) -> f64 {
+    let tiny = 4.0 * f64::EPSILON * lo.abs().max(hi.abs()).max(f64::MIN_POSITIVE);
+    let mut x = if x0 > lo && x0 < hi {
+        x0
+    } else {
+        0.5 * (lo + hi)
+    };
+    for _ in 0..100 {
+        let (fx, dfx, ddfx) = f(x);
+        if fx.abs() <= ftol {
+            return x;
+        }
+        if fx < 0.0 {
+            lo = x;
+        } else {
+            hi = x;
+        }
+        let disc = dfx * dfx - 2.0 * fx * ddfx;
+        let step = -2.0 * fx / (dfx + dfx.signum() * disc.sqrt());
+        let step = if ddfx.is_finite() && disc >= 0.0 && step.is_finite() {
+            step
+        } else {
+            -fx / dfx
+        };
+        let mut xn = x + step;
+        if !(xn >= lo && xn <= hi) {
+            xn = 0.5 * (lo + hi);
+        }
+        if (xn - x).abs() <= tiny || hi - lo <= tiny {
+            return xn;
+        }
+        x = xn;
+    }
+    x
+}
+
 /// Bracketed root of `f` on [lo, hi] (Illinois variant of regula falsi), assuming
 /// f(lo) ≤ 0 ≤ f(hi) or the reverse. Returns the best point after convergence to
 /// machine precision or 200 iterations.

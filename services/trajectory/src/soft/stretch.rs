@@ -13,7 +13,7 @@
 
 use super::from_state::brake_point;
 use super::velocity::{ramp, ramp_from_rest, velocity_change};
-use super::{Kin, Limits1, Phases, rest_to_rest, solve_known, solve_tol, stop_velocity};
+use super::{Kin, Limits1, Phases, newton_increasing, rest_to_rest, stop_velocity};
 
 /// Prepared stretch problem for one joint (positive frame).
 #[derive(Debug, Clone, Copy)]
@@ -24,11 +24,12 @@ pub struct Stretch {
     d: f64,
     /// Upper anchor of the peak-velocity search (vmax, or the zero-cruise vp).
     vp_hi: f64,
-    /// Duration of the fastest stop, and of the fastest rest-to-rest move from the
-    /// stop point to the target: the fallback "stop, then move" needs their sum.
-    t_stop: f64,
+    /// Brake point (positive frame): where the fastest stop ends.
+    pb: f64,
+    /// From rest: the time-optimal duration (nothing shorter is reachable).
     t_r2r: f64,
     rest: bool,
+    lim: Limits1,
 }
 
 impl Stretch {
@@ -40,6 +41,23 @@ impl Stretch {
     /// [`Stretch::new`] given the optimal motion's peak velocity (from
     /// [`super::from_state::time_optimal_peak`]), which saves a root search.
     pub fn with_anchor(v0: f64, a0: f64, d: f64, lim: &Limits1, anchor: Option<f64>) -> Self {
+        let pb = if v0 == 0.0 && a0 == 0.0 {
+            0.0
+        } else {
+            brake_point(v0, a0, lim)
+        };
+        Self::prepared(v0, a0, d, lim, anchor, pb)
+    }
+
+    /// [`Stretch::with_anchor`] given the brake point `pb` of (v0, a0) as well.
+    pub(crate) fn prepared(
+        v0: f64,
+        a0: f64,
+        d: f64,
+        lim: &Limits1,
+        anchor: Option<f64>,
+        pb: f64,
+    ) -> Self {
         if v0 == 0.0 && a0 == 0.0 {
             let t_r2r = rest_to_rest::time_optimal_duration(d.abs(), lim);
             return Self {
@@ -48,26 +66,56 @@ impl Stretch {
                 a0,
                 d: d.abs(),
                 vp_hi: lim.v,
-                t_stop: 0.0,
+                pb: 0.0,
                 t_r2r,
                 rest: true,
+                lim: *lim,
             };
         }
-        let pb = brake_point(v0, a0, lim);
         let sg = if d >= pb { 1.0 } else { -1.0 };
         let (v, a, dd) = (sg * v0, sg * a0, sg * d);
+        // Zero-cruise distance D(vp) = D1 + D2 and its slope
+        // D' = vp·(T1' + T2') + (a1 + a2)/(2J) (see [`Stretch::eval`]).
         let dist = |vp: f64| {
             let r1 = ramp(v, a, vp, lim);
             let k = r1.integrate(Kin { p: 0.0, v, a });
-            let (_, _, d2) = ramp_from_rest(vp, lim);
-            k.p + d2
+            let (t1, t2, d2) = ramp_from_rest(vp, lim);
+            let s1 = r1.j.signum();
+            let dt1 = if r1.t[1] > 0.0 {
+                s1 / lim.a
+            } else {
+                s1 / (r1.t[2] * lim.j)
+            };
+            let dt2 = if t2 > 0.0 {
+                1.0 / lim.a
+            } else {
+                1.0 / (t1 * lim.j)
+            };
+            (k.p + d2, vp * (dt1 + dt2) + 0.5 * (r1.t[2] + t1))
         };
         let vp_hi = if let Some(vp) = anchor {
             vp.clamp(0.0, lim.v)
-        } else if dd >= dist(lim.v) {
+        } else if dd >= dist(lim.v).0 {
             lim.v
         } else {
-            solve_tol(|vp| dist(vp) - dd, 0.0, lim.v, 1e-14 * (1.0 + dd.abs()))
+            // D increases above the stop velocity m: the largest root lies there when
+            // D(m) ≤ d; otherwise take a root below m (D may rise and fall there).
+            let m = stop_velocity(v, a, lim.j).clamp(0.0, lim.v);
+            let (lo, hi) = if dist(m).0 <= dd {
+                (m, lim.v)
+            } else {
+                (0.0, m)
+            };
+            newton_increasing(
+                |vp| {
+                    let (x, dx) = dist(vp);
+                    (x - dd, dx)
+                },
+                lo,
+                hi,
+                0.5 * (lo + hi),
+                1e-14 * (1.0 + dd.abs()),
+            )
         };
         Self {
             sg,
@@ -75,16 +123,23 @@ impl Stretch {
             a0: a,
             d: dd,
             vp_hi,
-            t_stop: ramp(v, a, 0.0, lim).duration(),
-            t_r2r: rest_to_rest::time_optimal_duration((d - pb).abs(), lim),
+            pb: sg * pb,
+            t_r2r: 0.0,
             rest: false,
+            lim: *lim,
         }
     }
 
     /// A duration from which on every longer one is reachable (stop, then a
     /// rest-to-rest move); shorter ones down to the minimum usually are too.
+    /// (Computed on demand: only synchronisation past a blocked duration needs it.)
     pub fn guaranteed(&self) -> f64 {
-        self.t_stop + self.t_r2r
+        if self.rest {
+            return self.t_r2r;
+        }
+        let lim = &self.lim;
+        ramp(self.v0, self.a0, 0.0, lim).duration()
+            + rest_to_rest::time_optimal_duration((self.d - self.pb).abs(), lim)
     }
 
     /// Phases (original frame) finishing at exactly `t`, or `None` when this family
@@ -109,9 +164,17 @@ impl Stretch {
         Some(ph)
     }
 
-    /// f(vp) and validity (cruise ≥ 0).
+    /// f(vp), its first two derivatives and validity (cruise ≥ 0).
+    ///
+    /// f(vp) = D1 + D2 + vp·Tc − d with Tc = t − T1 − T2. Each ramp satisfies
+    /// dD/dvp − vp·dT/dvp = a_peak/(2J) (a_peak its peak |acceleration|, with or
+    /// without an amax phase, either direction), so f'(vp) = Tc + (a1 + a2)/(2J) > 0:
+    /// f increases wherever the cruise is non-negative. Differentiating once more,
+    /// each ramp adds −(dT/dvp − da_peak/dvp/(2J)): −s/A with an amax phase, else
+    /// −3s/(4 a_peak) (s = ±1, the sign of its velocity change). Where both ramps hold
+    /// amax, f is exactly quadratic (linear when the first ramp slows down).
     #[inline]
-    fn f(&self, vp: f64, t: f64, lim: &Limits1) -> (f64, bool) {
+    fn eval(&self, vp: f64, t: f64, lim: &Limits1) -> Eval {
         let (v, a) = (self.v0, self.a0);
         let r1 = ramp(v, a, vp, lim);
         let k = r1.integrate(Kin { p: 0.0, v, a });
@@ -123,54 +186,76 @@ impl Stretch {
         } else {
             tc
         };
-        (k.p + d2 + vp * tc - self.d, tc >= 0.0)
+        // a1/(2J) = t[2]/2 (the ramp's last phase takes its peak to 0), a2/(2J) = t1/2.
+        let df = tc + 0.5 * (r1.t[2] + t1);
+        let s1 = r1.j.signum();
+        let k1 = if r1.t[1] > 0.0 {
+            1.0 / lim.a
+        } else {
+            0.75 / (r1.t[2] * lim.j)
+        };
+        let k2 = if t2 > 0.0 {
+            1.0 / lim.a
+        } else {
+            0.75 / (t1 * lim.j)
+        };
+        Eval {
+            x: vp,
+            f: k.p + d2 + vp * tc - self.d,
+            df,
+            ddf: -(s1 * k1 + k2),
+            ok: tc >= 0.0,
+        }
+    }
+
+    /// Root of f on [lo, top.x], given f(top.x) ≥ 0, by safeguarded steps to the root
+    /// of the local quadratic model (exact where both ramps hold amax, cubically
+    /// convergent elsewhere; Newton where the model has no real root). f(lo) is only
+    /// evaluated when a step falls below lo. Invalid points (negative cruise) count
+    /// as below the root.
+    fn descend(&self, lo0: f64, top: Eval, t: f64, lim: &Limits1) -> Descent {
+        let ftol = 1e-14 * (1.0 + self.d.abs());
+        let tiny = 4.0 * f64::EPSILON * top.x.abs().max(f64::MIN_POSITIVE);
+        let (mut lo, mut hi, mut lo_checked) = (lo0, top.x, false);
+        let mut e = top;
+        for _ in 0..100 {
+            if e.ok && e.f.abs() <= ftol {
+                return Descent::Root(e.x);
+            }
+            if !e.ok || e.f < 0.0 {
+                (lo, lo_checked) = (e.x, true);
+            } else {
+                hi = e.x;
+            }
+            let mut xn = if e.ok { e.x + model_step(&e) } else { f64::NAN };
+            if !(xn >= lo && xn <= hi) {
+                if !lo_checked {
+                    let el = self.eval(lo0, t, lim);
+                    if el.ok && el.f > ftol {
+                        return Descent::LowPositive(el);
+                    }
+                    if el.ok && el.f.abs() <= ftol {
+                        return Descent::Root(lo0);
+                    }
+                    lo_checked = true;
+                }
+                xn = 0.5 * (lo + hi);
+            }
+            if (xn - e.x).abs() <= tiny || hi - lo <= tiny {
+                let en = self.eval(xn, t, lim);
+                return if en.ok && en.f.abs() <= 1e-9 * (1.0 + self.d.abs()) {
+                    Descent::Root(xn)
+                } else {
+                    Descent::Fail
+                };
+            }
+            e = self.eval(xn, t, lim);
+        }
+        Descent::Fail
     }
 
     fn search(&self, t: f64, lim: &Limits1) -> Option<Phases> {
-        let u = self.vp_hi;
-        let (fu, ok_u) = self.f(u, t, lim);
-        let mut bracket = None;
-        if ok_u && fu >= 0.0 {
-            let m = stop_velocity(self.v0, self.a0, lim.j).clamp(0.0, u);
-            let (fm, ok_m) = self.f(m, t, lim);
-            if ok_m && fm <= 0.0 {
-                bracket = Some(((m, fm), (u, fu)));
-            }
-        }
-        if bracket.is_none() {
-            const N: usize = 16;
-            let mut prev: Option<(f64, f64)> = ok_u.then_some((u, fu));
-            for k in (0..N).rev() {
-                let x = u * k as f64 / N as f64;
-                let (fx, ok) = self.f(x, t, lim);
-                if !ok {
-                    prev = None;
-                    continue;
-                }
-                if let Some((xp, fp)) = prev
-                    && fp >= 0.0
-                    && fx <= 0.0
-                {
-                    bracket = Some(((x, fx), (xp, fp)));
-                    break;
-                }
-                prev = Some((x, fx));
-            }
-        }
-        let (lo, hi) = bracket?;
-        let vp = solve_known(
-            |vp| {
-                let (fx, ok) = self.f(vp, t, lim);
-                if ok { fx } else { -1.0 - self.d.abs() }
-            },
-            lo,
-            hi,
-            1e-14 * (1.0 + self.d.abs()),
-        );
-        let (fx, ok) = self.f(vp, t, lim);
-        if !ok || fx.abs() > 1e-9 * (1.0 + self.d.abs()) {
-            return None;
-        }
+        let vp = self.peak_velocity(t, lim)?;
         let mut ph = velocity_change(self.v0, self.a0, vp, lim);
         let (t1, t2, _) = ramp_from_rest(vp, lim);
         ph.push((t - ph.duration() - 2.0 * t1 - t2).max(0.0), 0.0);
@@ -178,6 +263,78 @@ impl Stretch {
         ph.push(t2, 0.0);
         ph.push(t1, lim.j);
         Some(ph)
+    }
+
+    /// The cruise velocity of the family member of duration `t`, if there is one.
+    fn peak_velocity(&self, t: f64, lim: &Limits1) -> Option<f64> {
+        let u = self.vp_hi;
+        let top = self.eval(u, t, lim);
+        let mut vp = None;
+        if top.ok && top.f >= 0.0 {
+            // Above the stop velocity m, T1 + T2 grows with vp, so [m, u] is all valid
+            // and f increases on it. When f(m) > 0 the root lies below m, on the valid
+            // stretch that ends at m (the first ramp then slows down to vp).
+            let m = stop_velocity(self.v0, self.a0, lim.j).clamp(0.0, u);
+            vp = match self.descend(m, top, t, lim) {
+                Descent::Root(x) => Some(x),
+                Descent::LowPositive(em) if m > 0.0 => match self.descend(0.0, em, t, lim) {
+                    Descent::Root(x) => Some(x),
+                    _ => None,
+                },
+                _ => None,
+            };
+        }
+        if vp.is_none() {
+            vp = self.grid_search(u, (top.f, top.ok), t, lim);
+        }
+        vp
+    }
+
+    /// Fallback: a 16-point grid from u down to 0 for a sign change between two valid
+    /// points, then safeguarded Newton inside it.
+    fn grid_search(&self, u: f64, (fu, ok_u): (f64, bool), t: f64, lim: &Limits1) -> Option<f64> {
+        const N: usize = 16;
+        let mut bracket = None;
+        let mut prev: Option<(f64, f64)> = ok_u.then_some((u, fu));
+        for k in (0..N).rev() {
+            let x = u * k as f64 / N as f64;
+            let Eval { f: fx, ok, .. } = self.eval(x, t, lim);
+            if !ok {
+                prev = None;
+                continue;
+            }
+            if let Some((xp, fp)) = prev
+                && fp >= 0.0
+                && fx <= 0.0
+            {
+                bracket = Some(((x, fx), (xp, fp)));
+                break;
+            }
+            prev = Some((x, fx));
+        }
+        let ((lo, flo), (hi, fhi)) = bracket?;
+        // f increases on the valid part of the bracket; an invalid point (negative
+        // cruise) counts as below the root, and its NaN slope makes Newton bisect.
+        let vp = newton_increasing(
+            |vp| {
+                let e = self.eval(vp, t, lim);
+                if e.ok {
+                    (e.f, e.df)
+                } else {
+                    (-1.0 - self.d.abs(), f64::NAN)
+                }
+            },
+            lo,
+            hi,
+            if fhi > flo {
+                (lo * fhi - hi * flo) / (fhi - flo)
+            } else {
+                hi
+            },
+            1e-14 * (1.0 + self.d.abs()),
+        );
+        let e = self.eval(vp, t, lim);
+        (e.ok && e.f.abs() <= 1e-9 * (1.0 + self.d.abs())).then_some(vp)
     }
 
     /// Fastest stop, then a rest-to-rest move taking the remaining time.
@@ -196,7 +353,10 @@ impl Stretch {
         let mut ph = stop;
         let mv = rest_to_rest::stretched(
             (self.d - pb).abs(),
-            (t - stop.duration()).max(self.t_r2r),
+            (t - stop.duration()).max(rest_to_rest::time_optimal_duration(
+                (self.d - pb).abs(),
+                lim,
+            )),
             lim,
         );
         let s = if self.d >= pb { 1.0 } else { -1.0 };
@@ -204,5 +364,245 @@ impl Stretch {
             ph.push(p.t, s * p.j);
         }
         Some(ph)
+    }
+}
+
+/// f and its derivatives at one peak velocity (see [`Stretch::eval`]).
+#[derive(Debug, Clone, Copy)]
+struct Eval {
+    x: f64,
+    f: f64,
+    df: f64,
+    ddf: f64,
+    /// Cruise ≥ 0: the point belongs to the family.
+    ok: bool,
+}
+
+/// How a descent ended.
+enum Descent {
+    Root(f64),
+    /// f(lo) > 0: the root, if any, lies below lo.
+    LowPositive(Eval),
+    Fail,
+}
+
+/// Step to the root of f + f'·δ + f''·δ²/2 nearest δ = 0 (the stable form of the
+/// quadratic formula); a Newton step when that has no real root.
+#[inline]
+fn model_step(e: &Eval) -> f64 {
+    let disc = e.df * e.df - 2.0 * e.f * e.ddf;
+    let q = e.df + disc.sqrt();
+    let step = -2.0 * e.f / q;
+    // An infinite curvature (a ramp whose peak acceleration is 0 here) gives no step.
+    if e.ddf.is_finite() && disc >= 0.0 && step.is_finite() {
+        step
+    } else {
+        -e.f / e.df
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::soft::{from_state, solve_known};
+
+    /// Deterministic pseudo-random numbers in [0, 1).
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// Random start inside the limits (no brake needed) and target.
+    fn case(r: &mut Lcg) -> (f64, f64, f64, Limits1) {
+        let lim = Limits1 {
+            v: 0.2 + 5.0 * r.next(),
+            a: 0.2 + 5.0 * r.next(),
+            j: 0.2 + 20.0 * r.next(),
+        };
+        let a0 = (2.0 * r.next() - 1.0) * lim.a.min(0.99 * (4.0 * lim.j * lim.v).sqrt());
+        let s = a0 * a0.abs() / (2.0 * lim.j);
+        let (lo, hi) = ((-lim.v).max(-lim.v - s), lim.v.min(lim.v - s));
+        let v0 = lo + r.next() * (hi - lo) * 0.999;
+        let d = (2.0 * r.next() - 1.0) * 3.0;
+        (v0, a0, d, lim)
+    }
+
+    /// The old search, kept as the oracle: from the anchor down, bracket [m, u] or a
+    /// 16-point grid, then Illinois regula falsi.
+    fn vp_by_bracketing(st: &Stretch, t: f64, lim: &Limits1) -> Option<f64> {
+        let g = |vp: f64| {
+            let e = st.eval(vp, t, lim);
+            (e.f, e.ok)
+        };
+        let u = st.vp_hi;
+        let (fu, ok_u) = g(u);
+        let mut bracket = None;
+        if ok_u && fu >= 0.0 {
+            let m = stop_velocity(st.v0, st.a0, lim.j).clamp(0.0, u);
+            let (fm, ok_m) = g(m);
+            if ok_m && fm <= 0.0 {
+                bracket = Some(((m, fm), (u, fu)));
+            }
+        }
+        if bracket.is_none() {
+            let mut prev = ok_u.then_some((u, fu));
+            for k in (0..16).rev() {
+                let x = u * k as f64 / 16.0;
+                let (fx, ok) = g(x);
+                if !ok {
+                    prev = None;
+                    continue;
+                }
+                if let Some((xp, fp)) = prev
+                    && fp >= 0.0
+                    && fx <= 0.0
+                {
+                    bracket = Some(((x, fx), (xp, fp)));
+                    break;
+                }
+                prev = Some((x, fx));
+            }
+        }
+        let (lo, hi) = bracket?;
+        let vp = solve_known(
+            |vp| {
+                let (fx, ok) = g(vp);
+                if ok { fx } else { -1.0 - st.d.abs() }
+            },
+            lo,
+            hi,
+            1e-14 * (1.0 + st.d.abs()),
+        );
+        let (fx, ok) = g(vp);
+        (ok && fx.abs() <= 1e-9 * (1.0 + st.d.abs())).then_some(vp)
+    }
+
+    /// Without an anchor, the top of the search is a zero-cruise member: D(vp_hi) = d
+    /// (or vmax when even that falls short), and no larger root exists above the
+    /// stop velocity.
+    #[test]
+    fn unanchored_top_is_a_zero_cruise_member() {
+        let mut r = Lcg(21);
+        for n in 0..4000 {
+            let (v0, a0, d, lim) = case(&mut r);
+            let st = Stretch::new(v0, a0, d, &lim);
+            if st.rest {
+                continue;
+            }
+            let dist = |vp: f64| {
+                let r1 = ramp(st.v0, st.a0, vp, &lim);
+                let k = r1.integrate(Kin {
+                    p: 0.0,
+                    v: st.v0,
+                    a: st.a0,
+                });
+                k.p + ramp_from_rest(vp, &lim).2
+            };
+            if st.vp_hi < lim.v {
+                let got = dist(st.vp_hi);
+                assert!(
+                    (got - st.d).abs() <= 1e-10 * (1.0 + st.d.abs()),
+                    "case {n}: D(vp_hi) {got} vs {}",
+                    st.d
+                );
+                // Above the stop velocity D increases: nothing above vp_hi reaches d.
+                let m = stop_velocity(st.v0, st.a0, lim.j).clamp(0.0, lim.v);
+                if st.vp_hi >= m {
+                    assert!(dist(0.5 * (st.vp_hi + lim.v)) >= st.d);
+                }
+            } else {
+                assert!(dist(lim.v) <= st.d * (1.0 + 1e-12) + 1e-12);
+            }
+        }
+    }
+
+    /// f' and f'' of `eval` are the derivatives of f (central differences away from
+    /// the kinks where a ramp changes direction or starts holding amax).
+    #[test]
+    fn eval_derivatives_match_differences() {
+        let mut r = Lcg(5);
+        let mut checked = 0;
+        for _ in 0..3000 {
+            let (v0, a0, d, lim) = case(&mut r);
+            let st = Stretch::new(v0, a0, d, &lim);
+            let t = 10.0 * r.next() + 1.0;
+            let x = 0.05 * lim.v + 0.9 * lim.v * r.next();
+            let h = 1e-5 * lim.v;
+            let (e, ep, em) = (
+                st.eval(x, t, &lim),
+                st.eval(x + h, t, &lim),
+                st.eval(x - h, t, &lim),
+            );
+            let smooth = (ep.ddf - em.ddf).abs() <= 1e-3 * (1.0 + e.ddf.abs())
+                && (ep.df - em.df - 2.0 * h * e.ddf).abs() <= 1e-3 * (1.0 + e.df.abs()) * h;
+            if !(e.ok && ep.ok && em.ok && smooth) {
+                continue;
+            }
+            checked += 1;
+            let d1 = (ep.f - em.f) / (2.0 * h);
+            assert!(
+                (d1 - e.df).abs() <= 1e-6 * (1.0 + e.df.abs()),
+                "f' {} vs {d1}",
+                e.df
+            );
+            let d2 = (ep.df - em.df) / (2.0 * h);
+            assert!(
+                (d2 - e.ddf).abs() <= 1e-4 * (1.0 + e.ddf.abs()),
+                "f'' {} vs {d2}",
+                e.ddf
+            );
+        }
+        assert!(checked > 1000, "only {checked} smooth points");
+    }
+
+    /// The model-step descent finds the same peak velocity as the old bracketed
+    /// search wherever that finds one, and every root it reports lands the motion on
+    /// the target at exactly t.
+    #[test]
+    fn descent_matches_bracketing_oracle() {
+        let mut r = Lcg(9);
+        let (mut both, mut only_new) = (0, 0);
+        for n in 0..4000 {
+            let (v0, a0, d, lim) = case(&mut r);
+            let st = Stretch::new(v0, a0, d, &lim);
+            let t_opt = from_state::time_optimal(v0, a0, d, &lim).duration();
+            let t = t_opt * (1.0 + [1e-9, 1e-3, 0.05, 0.3, 1.0, 3.0][n % 6] * r.next());
+            let old = vp_by_bracketing(&st, t, &lim);
+            let new = st.peak_velocity(t, &lim);
+            if let Some(ph) = st.search(t, &lim) {
+                let end = ph.integrate(Kin {
+                    p: 0.0,
+                    v: st.v0,
+                    a: st.a0,
+                });
+                assert!(
+                    (end.p - st.d).abs() <= 1e-8 * (1.0 + st.d.abs()),
+                    "case {n}: misses"
+                );
+                assert!((ph.duration() - t).abs() <= 1e-9 * t, "case {n}: not at t");
+            }
+            match (old, new) {
+                (Some(_), None) => panic!("case {n}: the oracle finds a root, the descent none"),
+                (Some(a), Some(b)) => {
+                    both += 1;
+                    assert!(
+                        (a - b).abs() <= 1e-7 * (1.0 + a),
+                        "case {n}: vp {b} vs oracle {a}"
+                    );
+                }
+                (None, Some(_)) => only_new += 1,
+                (None, None) => {}
+            }
+        }
+        assert!(
+            both > 3000,
+            "{both} cases compared ({only_new} found by the descent only)"
+        );
     }
 }
