@@ -340,6 +340,7 @@ fn push_duration(v0: f64, a0: f64, d: f64, pb: f64, tmax: f64, p_max: f64, lim: 
 mod tests {
     use super::*;
     use crate::soft::solve_known;
+    use crate::soft::test_cases::{Lcg, random_moving_start};
 
     /// The old numeric search, kept as the oracle: Illinois regula falsi on e(τ) = d.
     fn tau_by_bracketing(v0: f64, a0: f64, d: f64, lim: &Limits1) -> f64 {
@@ -354,29 +355,9 @@ mod tests {
         )
     }
 
-    /// Deterministic pseudo-random numbers in [0, 1).
-    struct Lcg(u64);
-    impl Lcg {
-        fn next(&mut self) -> f64 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
-
     /// Random inside-the-limits start (positive frame) and a target in [pb, p_max).
     fn case(r: &mut Lcg) -> (f64, f64, f64, Limits1) {
-        let lim = Limits1 {
-            v: 0.2 + 5.0 * r.next(),
-            a: 0.2 + 5.0 * r.next(),
-            j: 0.2 + 20.0 * r.next(),
-        };
-        let a0 = (2.0 * r.next() - 1.0) * lim.a.min(0.99 * (4.0 * lim.j * lim.v).sqrt());
-        let s = a0 * a0.abs() / (2.0 * lim.j);
-        let (lo, hi) = ((-lim.v).max(-lim.v - s), lim.v.min(lim.v - s));
-        let v0 = lo + r.next() * (hi - lo) * 0.999;
+        let (v0, a0, lim) = random_moving_start(r);
         let pb = brake_point(v0, a0, &lim);
         let tmax = tau_max(v0, a0, &lim);
         let p_max = push_then_stop_end(v0, a0, tmax, &lim);

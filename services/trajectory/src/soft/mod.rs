@@ -45,12 +45,66 @@ pub fn stop_velocity(v: f64, a: f64, j: f64) -> f64 {
 
 /// Root of an increasing function on the bracket [lo, hi] (f(lo) ≤ 0 ≤ f(hi)) by
 /// Newton's method from `x0`, with `f` returning the value and the exact derivative.
-/// Safeguarded: every evaluation shrinks the bracket, and a step that would leave it
-/// (or a zero or non-finite slope) bisects instead, so it converges like bisection at
-/// worst and quadratically near a simple root. Stops once |f| ≤ `ftol` (the caller's
-/// round-off level of f) or a step falls below a few ulps of the bracket's scale.
+/// Safeguarded (see [`safeguarded_root`]): quadratic near a simple root, bisection at
+/// worst.
 #[inline]
 pub(crate) fn newton_increasing(
+    mut f: impl FnMut(f64) -> (f64, f64),
+    lo: f64,
+    hi: f64,
+    x0: f64,
+    ftol: f64,
+) -> f64 {
+    safeguarded_root(
+        |x| {
+            let (fx, dfx) = f(x);
+            (fx, -fx / dfx)
+        },
+        lo,
+        hi,
+        x0,
+        ftol,
+    )
+}
+
+/// [`newton_increasing`] with the second derivative too (`f` returns f, f', f''):
+/// each step goes to the root of the local quadratic model nearest x (cubically
+/// convergent; exact for a quadratic f), a Newton step where the model has no real
+/// root, a bisection where the step would leave the bracket.
+#[inline]
+pub(crate) fn model_root_increasing(
+    mut f: impl FnMut(f64) -> (f64, f64, f64),
+    lo: f64,
+    hi: f64,
+    x0: f64,
+    ftol: f64,
+) -> f64 {
+    safeguarded_root(
+        |x| {
+            let (fx, dfx, ddfx) = f(x);
+            let disc = dfx * dfx - 2.0 * fx * ddfx;
+            let step = -2.0 * fx / (dfx + dfx.signum() * disc.sqrt());
+            let step = if ddfx.is_finite() && disc >= 0.0 && step.is_finite() {
+                step
+            } else {
+                -fx / dfx
+            };
+            (fx, step)
+        },
+        lo,
+        hi,
+        x0,
+        ftol,
+    )
+}
+
+/// The bracketing loop both root finders share: `f(x)` returns f(x) and the step its
+/// local model proposes. Every evaluation shrinks the bracket [lo, hi] (f increasing),
+/// a step that would leave it (or a non-finite one) bisects instead. Stops once
+/// |f| ≤ `ftol` (the caller's round-off level of f) or a step falls below a few ulps
+/// of the bracket's scale.
+#[inline(always)]
+fn safeguarded_root(
     mut f: impl FnMut(f64) -> (f64, f64),
     mut lo: f64,
     mut hi: f64,
@@ -64,7 +118,7 @@ pub(crate) fn newton_increasing(
         0.5 * (lo + hi)
     };
     for _ in 0..100 {
-        let (fx, dfx) = f(x);
+        let (fx, step) = f(x);
         if fx.abs() <= ftol {
             return x;
         }
@@ -73,53 +127,6 @@ pub(crate) fn newton_increasing(
         } else {
             hi = x;
         }
-        let mut xn = x - fx / dfx;
-        if !(xn >= lo && xn <= hi) {
-            xn = 0.5 * (lo + hi);
-        }
-        if (xn - x).abs() <= tiny || hi - lo <= tiny {
-            return xn;
-        }
-        x = xn;
-    }
-    x
-}
-
-/// [`newton_increasing`] with the second derivative too (`f` returns f, f', f''):
-/// each step goes to the root of the local quadratic model nearest x (cubically
-/// convergent; exact for a quadratic f), a Newton step where the model has no real
-/// root, a bisection where the step would leave the bracket.
-#[inline]
-pub(crate) fn model_root_increasing(
-    mut f: impl FnMut(f64) -> (f64, f64, f64),
-    mut lo: f64,
-    mut hi: f64,
-    x0: f64,
-    ftol: f64,
-) -> f64 {
-    let tiny = 4.0 * f64::EPSILON * lo.abs().max(hi.abs()).max(f64::MIN_POSITIVE);
-    let mut x = if x0 > lo && x0 < hi {
-        x0
-    } else {
-        0.5 * (lo + hi)
-    };
-    for _ in 0..100 {
-        let (fx, dfx, ddfx) = f(x);
-        if fx.abs() <= ftol {
-            return x;
-        }
-        if fx < 0.0 {
-            lo = x;
-        } else {
-            hi = x;
-        }
-        let disc = dfx * dfx - 2.0 * fx * ddfx;
-        let step = -2.0 * fx / (dfx + dfx.signum() * disc.sqrt());
-        let step = if ddfx.is_finite() && disc >= 0.0 && step.is_finite() {
-            step
-        } else {
-            -fx / dfx
-        };
         let mut xn = x + step;
         if !(xn >= lo && xn <= hi) {
             xn = 0.5 * (lo + hi);
@@ -202,4 +209,38 @@ pub(crate) fn solve_known(
         }
     }
     if flo.abs() < fhi.abs() { lo } else { hi }
+}
+
+/// Random cases shared by the solvers' unit tests.
+#[cfg(test)]
+pub(crate) mod test_cases {
+    use super::Limits1;
+
+    /// Deterministic pseudo-random numbers in [0, 1).
+    pub(crate) struct Lcg(pub u64);
+
+    impl Lcg {
+        pub(crate) fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// Random limits and a moving start (v0, a0) inside them that needs no brake:
+    /// |a0| within amax and √(4·jmax·vmax), the stop velocity within ±vmax.
+    pub(crate) fn random_moving_start(r: &mut Lcg) -> (f64, f64, Limits1) {
+        let lim = Limits1 {
+            v: 0.2 + 5.0 * r.next(),
+            a: 0.2 + 5.0 * r.next(),
+            j: 0.2 + 20.0 * r.next(),
+        };
+        let a0 = (2.0 * r.next() - 1.0) * lim.a.min(0.99 * (4.0 * lim.j * lim.v).sqrt());
+        let s = a0 * a0.abs() / (2.0 * lim.j);
+        let (lo, hi) = ((-lim.v).max(-lim.v - s), lim.v.min(lim.v - s));
+        let v0 = lo + r.next() * (hi - lo) * 0.999;
+        (v0, a0, lim)
+    }
 }

@@ -293,25 +293,10 @@ impl Stretch {
     /// Fallback: a 16-point grid from u down to 0 for a sign change between two valid
     /// points, then safeguarded Newton inside it.
     fn grid_search(&self, u: f64, (fu, ok_u): (f64, bool), t: f64, lim: &Limits1) -> Option<f64> {
-        const N: usize = 16;
-        let mut bracket = None;
-        let mut prev: Option<(f64, f64)> = ok_u.then_some((u, fu));
-        for k in (0..N).rev() {
-            let x = u * k as f64 / N as f64;
-            let Eval { f: fx, ok, .. } = self.eval(x, t, lim);
-            if !ok {
-                prev = None;
-                continue;
-            }
-            if let Some((xp, fp)) = prev
-                && fp >= 0.0
-                && fx <= 0.0
-            {
-                bracket = Some(((x, fx), (xp, fp)));
-                break;
-            }
-            prev = Some((x, fx));
-        }
+        let bracket = grid_bracket(u, (fu, ok_u), |x| {
+            let e = self.eval(x, t, lim);
+            (e.f, e.ok)
+        });
         let ((lo, flo), (hi, fhi)) = bracket?;
         // f increases on the valid part of the bracket; an invalid point (negative
         // cruise) counts as below the root, and its NaN slope makes Newton bisect.
@@ -386,6 +371,35 @@ enum Descent {
     Fail,
 }
 
+/// Scans a 16-point grid from `u` (where f = `fu`, valid if `ok_u`) down to 0 for the
+/// first sign change (f ≥ 0 above, ≤ 0 below) between two neighbouring valid points;
+/// `g(x)` returns f(x) and whether x is valid. Returns the bracket ((lo, f(lo)),
+/// (hi, f(hi))).
+fn grid_bracket(
+    u: f64,
+    (fu, ok_u): (f64, bool),
+    mut g: impl FnMut(f64) -> (f64, bool),
+) -> Option<((f64, f64), (f64, f64))> {
+    const N: usize = 16;
+    let mut prev = ok_u.then_some((u, fu));
+    for k in (0..N).rev() {
+        let x = u * k as f64 / N as f64;
+        let (fx, ok) = g(x);
+        if !ok {
+            prev = None;
+            continue;
+        }
+        if let Some((xp, fp)) = prev
+            && fp >= 0.0
+            && fx <= 0.0
+        {
+            return Some(((x, fx), (xp, fp)));
+        }
+        prev = Some((x, fx));
+    }
+    None
+}
+
 /// Step to the root of f + f'·δ + f''·δ²/2 nearest δ = 0 (the stable form of the
 /// quadratic formula); a Newton step when that has no real root.
 #[inline]
@@ -404,31 +418,12 @@ fn model_step(e: &Eval) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::soft::test_cases::{Lcg, random_moving_start};
     use crate::soft::{from_state, solve_known};
-
-    /// Deterministic pseudo-random numbers in [0, 1).
-    struct Lcg(u64);
-    impl Lcg {
-        fn next(&mut self) -> f64 {
-            self.0 = self
-                .0
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
 
     /// Random start inside the limits (no brake needed) and target.
     fn case(r: &mut Lcg) -> (f64, f64, f64, Limits1) {
-        let lim = Limits1 {
-            v: 0.2 + 5.0 * r.next(),
-            a: 0.2 + 5.0 * r.next(),
-            j: 0.2 + 20.0 * r.next(),
-        };
-        let a0 = (2.0 * r.next() - 1.0) * lim.a.min(0.99 * (4.0 * lim.j * lim.v).sqrt());
-        let s = a0 * a0.abs() / (2.0 * lim.j);
-        let (lo, hi) = ((-lim.v).max(-lim.v - s), lim.v.min(lim.v - s));
-        let v0 = lo + r.next() * (hi - lo) * 0.999;
+        let (v0, a0, lim) = random_moving_start(r);
         let d = (2.0 * r.next() - 1.0) * 3.0;
         (v0, a0, d, lim)
     }
@@ -451,23 +446,7 @@ mod tests {
             }
         }
         if bracket.is_none() {
-            let mut prev = ok_u.then_some((u, fu));
-            for k in (0..16).rev() {
-                let x = u * k as f64 / 16.0;
-                let (fx, ok) = g(x);
-                if !ok {
-                    prev = None;
-                    continue;
-                }
-                if let Some((xp, fp)) = prev
-                    && fp >= 0.0
-                    && fx <= 0.0
-                {
-                    bracket = Some(((x, fx), (xp, fp)));
-                    break;
-                }
-                prev = Some((x, fx));
-            }
+            bracket = grid_bracket(u, (fu, ok_u), g);
         }
         let (lo, hi) = bracket?;
         let vp = solve_known(
