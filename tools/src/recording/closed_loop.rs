@@ -66,7 +66,7 @@ impl ClosedLoop {
         };
         let sim = SimArm::new(&robot, &cfg.actuator.sim, &initial_q(&robot, cfg));
         let mut actuator = ActuatorCore::new(sim, &robot, cfg)
-            .map_err(|e| anyhow!("simulated arm: {e:?}"))
+            .map_err(|e| anyhow!("simulated arm: {e}"))
             .context("closed-loop replay")?;
         let period_ns = cfg.period_ns();
         // Any start works: in lockstep, time only stamps messages and feeds the
