@@ -422,7 +422,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .attach_notification(shutdown)
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
 
-    let mut phased = false;
+    // Free-running with the planner on its own timer, the plant steps are phased half a
+    // period after the planner's ticks (below). When the planner ticks on states, this
+    // timer is the pipeline's master clock and is left where it is.
+    let mut phased = cfg.planner_ticks_on_states();
     let publish = |s: JointState| {
         let ok = state_pub.send_copy(s).is_ok();
         let _ = state_notifier.notify();

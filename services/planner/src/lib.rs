@@ -631,8 +631,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .history_request(1)
         .create()
         .map_err(|e| err("state subscriber")(&e))?;
-    // Only lockstep wakes on states; free-running reads the newest state each tick.
-    let st_listener = if cfg.lockstep {
+    // Ticking on states wakes on them; the timer clock reads the newest state each tick.
+    let on_states = cfg.planner_ticks_on_states();
+    let st_listener = if on_states {
         Some(
             open_event(&node, inst, ServiceKind::State)?
                 .listener_builder()
@@ -692,8 +693,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let mut lateness = LatencyHistogram::new();
     let PeriodicClock { timer, mut ticker } =
         PeriodicClock::start(cfg.period_ns(), cfg.realtime.overrun)?;
-    if cfg.lockstep {
-        // Lockstep ticks on states; the timer only paces status and watchdog checks.
+    if on_states {
+        // Ticks come from states; the timer only paces status and watchdog checks.
         let p = status.period_ns();
         timer.arm_absolute(monotonic_ns() + p, p)?;
     }
@@ -720,7 +721,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let fill = |st: &mut ServiceStatus,
                 core: &PlannerCore,
                 lat: &LatencyHistogram,
-                ticker: &microrobot_runtime::Ticker| {
+                ticker: &microrobot_runtime::Ticker,
+                state_clock_misses: u64| {
         st.ready = 1;
         st.lifecycle = if core.mode() == Mode::EStop || core.mode() == Mode::SafeHold {
             LifecycleState::Fault as u32
@@ -730,6 +732,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.cycles = core.counters.ticks;
         st.deadline_misses = if cfg.lockstep {
             0
+        } else if on_states {
+            state_clock_misses
         } else {
             ticker.deadline_misses
         };
@@ -749,11 +753,13 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.latency = lat.summary();
     };
 
+    // Ticks on states that woke more than one period after the state was stamped.
+    let mut state_clock_misses = 0u64;
     if cfg.lockstep {
         // The first setpoint answers the initial state.
         publish(core.tick(monotonic_ns()));
     }
-    fill(&mut st, &core, &lateness, &ticker);
+    fill(&mut st, &core, &lateness, &ticker, state_clock_misses);
     status.publish(monotonic_ns(), &mut st);
 
     while !shutdown.is_requested() {
@@ -788,8 +794,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 }
             }
         }
-        // States: in lockstep each one is a tick; otherwise keep the newest.
-        if fired[0] || !cfg.lockstep {
+        // States: ticking on states, each one is a tick; otherwise keep the newest.
+        if fired[0] || !on_states {
             if let Some(l) = &st_listener {
                 let _ = l.try_wait(|_| {});
             }
@@ -797,8 +803,15 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
-                if core.accept_state(&msg, publisher) && cfg.lockstep {
+                if core.accept_state(&msg, publisher) && on_states {
                     let now = monotonic_ns();
+                    if !cfg.lockstep {
+                        // The state's stamp is the master clock's tick: lateness is the
+                        // wake-up after it, as for the timer clock.
+                        let late = now.saturating_sub(msg.header.stamp_ns);
+                        lateness.record(late);
+                        state_clock_misses += u64::from(late > cfg.period_ns());
+                    }
                     core.check_state(now);
                     publish(core.tick(now));
                 }
@@ -806,8 +819,12 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         }
         if fired[2] {
             ticker.on_expirations(timer.read_expirations());
-            if cfg.lockstep {
+            if on_states {
                 while ticker.next_tick().is_some() {}
+                // A silent actuator stops the ticks: the stale check still runs here.
+                if !cfg.lockstep {
+                    core.check_state(monotonic_ns());
+                }
             } else {
                 while let Some(t) = ticker.next_tick() {
                     let now = monotonic_ns();
@@ -819,11 +836,11 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         }
         let now = monotonic_ns();
         if status.due(now) {
-            fill(&mut st, &core, &lateness, &ticker);
+            fill(&mut st, &core, &lateness, &ticker, state_clock_misses);
             status.publish(now, &mut st);
         }
     }
-    fill(&mut st, &core, &lateness, &ticker);
+    fill(&mut st, &core, &lateness, &ticker, state_clock_misses);
     status.publish_final(&mut st);
     Ok(())
 }
