@@ -30,9 +30,8 @@ pub struct ModelData {
     /// RNEA: body forces and moments (frame `i`, about its origin).
     pub(crate) force: [Vector3<f64>; MAX_JOINTS],
     pub(crate) moment: [Vector3<f64>; MAX_JOINTS],
-    /// Last mass matrix and its `L D Lᵀ` factors (see `dynamics::forward`).
+    /// Last mass matrix.
     pub(crate) mass: MassMatrix,
-    pub(crate) chol: MassMatrix,
 }
 
 impl ModelData {
@@ -49,7 +48,6 @@ impl ModelData {
             force: [Vector3::zeros(); MAX_JOINTS],
             moment: [Vector3::zeros(); MAX_JOINTS],
             mass: MassMatrix::zeros(),
-            chol: MassMatrix::zeros(),
         }
     }
 

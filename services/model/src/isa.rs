@@ -92,6 +92,25 @@ macro_rules! multiversion {
 }
 pub(crate) use multiversion;
 
+/// Evaluates `$body` with `$n` bound to the joint count `$dof`: as the constant
+/// 6 for six-joint arms (the seed arm), so that the compiler unrolls every
+/// joint loop and drops their bounds checks, and as a run-time value otherwise.
+macro_rules! for_dof {
+    ($dof:expr, |$n:ident| $body:expr) => {
+        match $dof {
+            6 => {
+                let $n: usize = 6;
+                $body
+            }
+            dof => {
+                let $n: usize = dof;
+                $body
+            }
+        }
+    };
+}
+pub(crate) use for_dof;
+
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
     use super::{Avx2, Baseline, has_avx2};

@@ -3,16 +3,21 @@
 //! smallest singular value, rank.
 
 use crate::data::ModelData;
-use crate::isa::{Isa, multiversion};
+use crate::isa::{Isa, for_dof, multiversion};
 use crate::math::Pose;
 use crate::robot::{Robot, Twist};
 use crate::{Jacobian, JointVector, MAX_JOINTS};
 use nalgebra::{Isometry3, Matrix3, SMatrix, Vector3};
 
-/// Evaluates `cos θ_i`, `sin θ_i` and `d_i` of every joint for `q` into `data`.
+/// Evaluates `cos θ_i`, `sin θ_i` and `d_i` of the `n = dof` joints for `q` into `data`.
 #[inline(always)]
-pub(crate) fn update_joint_values<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) {
-    let n = robot.dof;
+pub(crate) fn update_joint_values<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    n: usize,
+) {
+    let n = n.min(MAX_JOINTS);
     let mut theta = [0.0; MAX_JOINTS];
     for i in 0..n {
         let jc = &robot.consts[i];
@@ -45,13 +50,13 @@ pub(crate) fn update_joint_values<S: Isa>(robot: &Robot, data: &mut ModelData, q
 /// only written to `data`: reading the previous frame back from memory would
 /// stall on store-to-load forwarding every joint.
 #[inline(always)]
-pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData) {
+pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData, n: usize) {
     let base = &data.frames[0];
     let mut x: Vector3<f64> = base.rotation.column(0).into_owned();
     let mut y: Vector3<f64> = base.rotation.column(1).into_owned();
     let mut z: Vector3<f64> = base.rotation.column(2).into_owned();
     let mut o = base.translation;
-    for i in 0..robot.dof {
+    for i in 0..n.min(MAX_JOINTS) {
         let jc = &robot.consts[i];
         let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
         // R_prev · Rz(θ): rotate the first two axes about z.
@@ -93,8 +98,10 @@ pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData) {
 
 #[inline(always)]
 pub(crate) fn update_kinematics_with<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) {
-    update_joint_values::<S>(robot, data, q);
-    update_frames(robot, data);
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        update_frames(robot, data, n)
+    })
 }
 
 multiversion! {
@@ -119,8 +126,11 @@ pub(crate) fn jacobian_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> Jacobian {
-    update_kinematics_with::<S>(robot, data, q);
-    jacobian_from_frames(robot, data)
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        update_frames(robot, data, n);
+        jacobian_of_frames(robot, data, n)
+    })
 }
 
 #[inline(always)]
@@ -149,9 +159,15 @@ multiversion! {
 /// The Jacobian from the frames already in `data`.
 #[inline(always)]
 pub(crate) fn jacobian_from_frames(robot: &Robot, data: &ModelData) -> Jacobian {
+    jacobian_of_frames(robot, data, robot.dof)
+}
+
+/// [`jacobian_from_frames`] for the first `n = dof` joints.
+#[inline(always)]
+fn jacobian_of_frames(robot: &Robot, data: &ModelData, n: usize) -> Jacobian {
     let mut jac = Jacobian::zeros();
     let p = data.tool.translation;
-    for j in 0..robot.dof {
+    for j in 0..n.min(MAX_JOINTS) {
         let f = &data.frames[j];
         let z: Vector3<f64> = f.rotation.column(2).into_owned();
         if robot.consts[j].revolute {

@@ -7,7 +7,7 @@
 //! The DH twist's signed permutations make most rotations free.
 
 use crate::data::ModelData;
-use crate::isa::{Isa, multiversion};
+use crate::isa::{Isa, for_dof, multiversion};
 use crate::kinematics::update_joint_values;
 use crate::math::joint_rot;
 use crate::robot::{JointConst, Robot, Twist};
@@ -112,8 +112,10 @@ pub(crate) fn mass_matrix_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> MassMatrix {
-    update_joint_values::<S>(robot, data, q);
-    mass_matrix_from_joint_values(robot, data);
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        mass_matrix_from_joint_values(robot, data, n)
+    });
     data.mass
 }
 
@@ -190,10 +192,10 @@ impl CarryColumns {
 /// the chain together, one joint at a time: they are independent, so the CPU
 /// overlaps them instead of waiting on one column's chain of rotations.
 #[inline(always)]
-pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData) {
-    let n = robot.dof;
+pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData, n: usize) {
+    let n = n.min(MAX_JOINTS);
     let mass = &mut data.mass;
-    mass.fill(0.0);
+    *mass = MassMatrix::zeros();
     // Composite of bodies i..n about the origin of the frame it is expressed in.
     let mut m = 0.0;
     let mut h = Vector3::zeros();

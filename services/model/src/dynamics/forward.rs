@@ -5,10 +5,10 @@
 use super::crba::mass_matrix_from_joint_values;
 use super::rnea::{RneaTerms, rnea_from_joint_values};
 use crate::data::ModelData;
-use crate::isa::{Isa, multiversion};
+use crate::isa::{Isa, for_dof, multiversion};
 use crate::kinematics::update_joint_values;
 use crate::robot::Robot;
-use crate::{JointVector, MAX_JOINTS, MassMatrix};
+use crate::{JointVector, MAX_JOINTS};
 
 /// Why forward dynamics has no unique answer.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
@@ -77,12 +77,30 @@ pub(crate) fn try_forward_dynamics_with<S: Isa>(
     qd: &JointVector,
     tau: &JointVector,
 ) -> Result<JointVector, DynamicsError> {
-    let n = robot.dof;
-    update_joint_values::<S>(robot, data, q);
-    mass_matrix_from_joint_values(robot, data);
+    for_dof!(robot.dof, |n| solve_forward_dynamics::<S>(
+        robot, data, q, qd, tau, n
+    ))
+}
+
+/// [`try_forward_dynamics`] for the `n = dof` joints.
+#[inline(always)]
+fn solve_forward_dynamics<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+    tau: &JointVector,
+    n: usize,
+) -> Result<JointVector, DynamicsError> {
+    // n <= MAX_JOINTS lets the compiler drop the bounds checks below.
+    let n = n.min(MAX_JOINTS);
+    update_joint_values::<S>(robot, data, q, n);
+    mass_matrix_from_joint_values(robot, data, n);
     // Factor before the RNEA: the pivots' divisions are a long dependency chain
     // that the CPU can overlap with the independent RNEA work that follows.
-    let inv_pivot = factor_ldlt(n, &data.mass, &mut data.chol)?;
+    // M is symmetric, so its column-major storage reads as rows too.
+    let mut a: Square = data.mass.data.0;
+    let inv_pivot = factor_ldlt(n, &mut a)?;
     let h = rnea_from_joint_values(
         robot,
         data,
@@ -92,67 +110,72 @@ pub(crate) fn try_forward_dynamics_with<S: Isa>(
             gravity: true,
             friction: true,
         },
+        n,
     );
-    let mut x = JointVector::zeros();
+    let mut x = [0.0; MAX_JOINTS];
     for i in 0..n {
         x[i] = tau[i] - h[i];
     }
     // L y = x, D z = y, Lᵀ qdd = z.
-    let l = &data.chol;
     for i in 0..n {
         let mut v = x[i];
         for k in 0..i {
-            v -= l[(i, k)] * x[k];
+            v -= a[i][k] * x[k];
         }
         x[i] = v;
     }
     for i in (0..n).rev() {
         let mut v = x[i] * inv_pivot[i];
         for k in (i + 1)..n {
-            v -= l[(k, i)] * x[k];
+            v -= a[k][i] * x[k];
         }
         x[i] = v;
     }
-    Ok(x)
+    let mut qdd = JointVector::zeros();
+    for i in 0..n {
+        qdd[i] = x[i];
+    }
+    Ok(qdd)
 }
 
-/// `M = L D Lᵀ` on the `n × n` block (`L` unit lower triangular): `L` below the
-/// diagonal of `out`, `D` on it, `L D` (transposed) above it. Returns `1 / D`.
-/// Unlike Cholesky it takes no square roots, which would lengthen the chain of
-/// dependent operations from pivot to pivot. A pivot that is NaN or not above
-/// `1e-14 ×` the largest diagonal entry means `M` is not (numerically) positive
-/// definite.
+/// An `n × n` block in the top left, `n <= MAX_JOINTS`, row by row.
+type Square = [[f64; MAX_JOINTS]; MAX_JOINTS];
+
+/// `M = L D Lᵀ` in place (`L` unit lower triangular) of the symmetric block
+/// `a`: `L` below the diagonal, `D` on it, `L D` (transposed) above it; returns
+/// `1 / D`. Unlike Cholesky it takes no square roots, which would lengthen the
+/// chain of dependent operations from pivot to pivot. A pivot that is NaN or
+/// not above `1e-14 ×` the largest diagonal entry means `M` is not
+/// (numerically) positive definite.
 #[inline(always)]
-fn factor_ldlt(
-    n: usize,
-    m: &MassMatrix,
-    out: &mut MassMatrix,
-) -> Result<[f64; MAX_JOINTS], DynamicsError> {
+#[allow(clippy::needless_range_loop)] // index loops read like the matrix formulas
+fn factor_ldlt(n: usize, a: &mut Square) -> Result<[f64; MAX_JOINTS], DynamicsError> {
+    let n = n.min(MAX_JOINTS);
     let mut scale = 0.0_f64;
     for j in 0..n {
-        scale = scale.max(m[(j, j)].abs());
+        scale = scale.max(a[j][j].abs());
     }
     let tiny = scale * 1e-14;
     let mut inv_pivot = [0.0; MAX_JOINTS];
     for j in 0..n {
-        // out[(k, j)] = L_jk D_k for k < j (stored when column k was done).
-        let mut pivot = m[(j, j)];
+        // a[k][j] = L_jk D_k for k < j (stored when column k was done).
+        let mut pivot = a[j][j];
         for k in 0..j {
-            pivot -= out[(j, k)] * out[(k, j)];
+            pivot -= a[j][k] * a[k][j];
         }
         if pivot.is_nan() || pivot <= tiny || tiny == 0.0 {
             return Err(DynamicsError::SingularMassMatrix { joint: j, pivot });
         }
-        out[(j, j)] = pivot;
+        a[j][j] = pivot;
         let inv = 1.0 / pivot;
         inv_pivot[j] = inv;
         for i in (j + 1)..n {
-            let mut v = m[(i, j)];
+            let mut v = a[i][j];
             for k in 0..j {
-                v -= out[(i, k)] * out[(k, j)];
+                v -= a[i][k] * a[k][j];
             }
-            out[(j, i)] = v;
-            out[(i, j)] = v * inv;
+            a[j][i] = v;
+            a[i][j] = v * inv;
         }
     }
     Ok(inv_pivot)

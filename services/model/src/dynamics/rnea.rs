@@ -1,12 +1,12 @@
 //! Recursive Newton-Euler inverse dynamics in DH link frames: velocities and
 //! accelerations outward from the base, forces and moments inward from the tip.
 
-use crate::JointVector;
 use crate::data::ModelData;
-use crate::isa::{Isa, multiversion};
+use crate::isa::{Isa, for_dof, multiversion};
 use crate::kinematics::update_joint_values;
 use crate::math::{cross_sparse, joint_rot, joint_rot_t, point_accel};
 use crate::robot::{Robot, Sparsity, Twist, friction};
+use crate::{JointVector, MAX_JOINTS};
 use nalgebra::Vector3;
 
 /// Which terms of the equation of motion [`rnea_from_joint_values`] includes.
@@ -29,8 +29,10 @@ pub(crate) fn rnea_with<S: Isa>(
     qd: &JointVector,
     qdd: &JointVector,
 ) -> JointVector {
-    update_joint_values::<S>(robot, data, q);
-    rnea_from_joint_values(robot, data, qd, qdd, ALL)
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        rnea_from_joint_values(robot, data, qd, qdd, ALL, n)
+    })
 }
 
 #[inline(always)]
@@ -40,8 +42,10 @@ pub(crate) fn nonlinear_effects_with<S: Isa>(
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
-    update_joint_values::<S>(robot, data, q);
-    rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), ALL)
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), ALL, n)
+    })
 }
 
 #[inline(always)]
@@ -50,13 +54,15 @@ pub(crate) fn gravity_torque_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> JointVector {
-    update_joint_values::<S>(robot, data, q);
-    let zero = JointVector::zeros();
-    let terms = RneaTerms {
-        gravity: true,
-        friction: false,
-    };
-    rnea_from_joint_values(robot, data, &zero, &zero, terms)
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        let zero = JointVector::zeros();
+        let terms = RneaTerms {
+            gravity: true,
+            friction: false,
+        };
+        rnea_from_joint_values(robot, data, &zero, &zero, terms, n)
+    })
 }
 
 #[inline(always)]
@@ -66,12 +72,14 @@ pub(crate) fn coriolis_torque_with<S: Isa>(
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
-    update_joint_values::<S>(robot, data, q);
-    let terms = RneaTerms {
-        gravity: false,
-        friction: false,
-    };
-    rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), terms)
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        let terms = RneaTerms {
+            gravity: false,
+            friction: false,
+        };
+        rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), terms, n)
+    })
 }
 
 multiversion! {
@@ -131,8 +139,9 @@ pub(crate) fn rnea_from_joint_values(
     qd: &JointVector,
     qdd: &JointVector,
     terms: RneaTerms,
+    n: usize,
 ) -> JointVector {
-    let n = robot.dof;
+    let n = n.min(MAX_JOINTS);
     let mut w = Vector3::zeros();
     let mut wd = Vector3::zeros();
     let mut acc = if terms.gravity {
