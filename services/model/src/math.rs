@@ -243,17 +243,20 @@ pub(crate) unsafe fn sin_cos_joints_avx2(
 ) {
     use std::arch::x86_64::*;
     for g in (0..n.min(crate::MAX_JOINTS)).step_by(4) {
-        let xs = [theta[g], theta[g + 1], theta[g + 2], theta[g + 3]];
-        if xs.iter().any(|x| x.is_nan() || x.abs() >= 1.0e5) {
-            for (k, x) in xs.iter().enumerate() {
-                (sin[g + k], cos[g + k]) = sin_cos(*x);
-            }
-            continue;
-        }
         // SAFETY: AVX2 is enabled for this function (caller's contract); the
         // loads and stores touch the four f64 at `g..g + 4` of arrays of
         // MAX_JOINTS (a multiple of 4) f64.
         unsafe {
+            let x = _mm256_loadu_pd(theta.as_ptr().add(g));
+            // |x| < 1e5 in all four lanes (false for NaN), else lane by lane.
+            let abs = _mm256_andnot_pd(_mm256_set1_pd(-0.0), x);
+            let small = _mm256_cmp_pd::<_CMP_LT_OQ>(abs, _mm256_set1_pd(1.0e5));
+            if _mm256_movemask_pd(small) != 0b1111 {
+                for k in g..g + 4 {
+                    (sin[k], cos[k]) = sin_cos(theta[k]);
+                }
+                continue;
+            }
             // Macros, not closures: a closure would not inherit AVX2.
             macro_rules! splat {
                 ($a:expr) => {
@@ -275,7 +278,6 @@ pub(crate) unsafe fn sin_cos_joints_avx2(
                     _mm256_sub_pd($a, $b)
                 };
             }
-            let x = _mm256_loadu_pd(xs.as_ptr());
             let magic = splat!(ROUND_MAGIC);
             let t = add!(mul!(x, splat!(std::f64::consts::FRAC_2_PI)), magic);
             let k = sub!(t, magic);
