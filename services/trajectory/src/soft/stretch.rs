@@ -355,7 +355,8 @@ enum Descent {
 /// Scans a 16-point grid from `u` (where f = `fu`, valid if `ok_u`) down to 0 for the
 /// first sign change (f ≥ 0 above, ≤ 0 below) between two neighbouring valid points;
 /// `g(x)` returns f(x) and whether x is valid. Returns the bracket ((lo, f(lo)),
-/// (hi, f(hi))).
+/// (hi, f(hi))). The old fallback search, kept for the tests' bracketing oracle (the
+/// exact member intervals of [`super::reach`] replaced it).
 #[cfg(test)]
 fn grid_bracket(
     u: f64,
