@@ -75,6 +75,8 @@ pub struct ActuatorCore<B: ActuatorBackend> {
     pub tracking_error_max: [f64; MAX_JOINTS],
     /// Largest |τ applied| per joint.
     pub peak_torque: [f64; MAX_JOINTS],
+    /// Why the last refused torque command was refused.
+    pub last_refusal: Option<Refusal>,
 }
 
 impl<B: ActuatorBackend> ActuatorCore<B> {
@@ -111,6 +113,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             counters: Counters::default(),
             tracking_error_max: [0.0; MAX_JOINTS],
             peak_torque: [0.0; MAX_JOINTS],
+            last_refusal: None,
         })
     }
 
@@ -175,6 +178,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             }
             Err(e) => {
                 self.counters.refused += 1;
+                self.last_refusal = Some(e);
                 Err(e)
             }
         }
@@ -281,6 +285,20 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                     self.tracking_error_max[i] = e;
                 }
             }
+        }
+        self.state_message(now_ns)
+    }
+
+    /// Shutdown: the backend goes Inactive (drives disabled, brakes on) if it was
+    /// active, and the returned last state message says so (lifecycle Inactive). Called
+    /// on every clean stop, including SIGTERM from a dead supervisor (PDEATHSIG).
+    pub fn shutdown(&mut self, now_ns: u64) -> JointState {
+        if self.backend.lifecycle() == LifecycleState::Active && self.backend.deactivate().is_err()
+        {
+            self.counters.faults += 1;
+        }
+        if let Ok(m) = self.backend.read() {
+            self.last_measured = m;
         }
         self.state_message(now_ns)
     }
@@ -454,6 +472,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.latency = e2e.summary();
         st.tracking_error_max = core.tracking_error_max;
         st.peak_torque = core.peak_torque;
+        st.last_input_refusal = core
+            .last_refusal
+            .map_or(microrobot_messages::RefusalReason::None, Refusal::reason)
+            as u32;
     };
     fill(&mut st, &core, &e2e, 0);
     status.publish(monotonic_ns(), &mut st);
@@ -547,6 +569,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             status.publish(now, &mut st);
         }
     }
+    // Safe on the way out, however the stop was asked for (Ctrl-C, SIGTERM, the
+    // supervisor's death): brakes on, and the last state says so.
+    publish(core.shutdown(monotonic_ns()));
+    tracing::info!("actuator: stopped, backend inactive (drives disabled)");
     fill(&mut st, &core, &e2e, 0);
     status.publish_final(&mut st);
     Ok(())

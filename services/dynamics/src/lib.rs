@@ -66,6 +66,8 @@ pub struct DynamicsCore {
     pub counters: Counters,
     /// Largest |τ| commanded per joint (after clamping).
     pub peak_torque: [f64; MAX_JOINTS],
+    /// Why the last refused setpoint or state was refused.
+    pub last_refusal: Option<Refusal>,
 }
 
 impl DynamicsCore {
@@ -103,6 +105,7 @@ impl DynamicsCore {
             last_tick_value: None,
             counters: Counters::default(),
             peak_torque: [0.0; MAX_JOINTS],
+            last_refusal: None,
         }
     }
 
@@ -133,6 +136,7 @@ impl DynamicsCore {
             }
             Err(e) => {
                 self.counters.refused += 1;
+                self.last_refusal = Some(e);
                 Err(e)
             }
         }
@@ -169,6 +173,7 @@ impl DynamicsCore {
             .and_then(|()| self.sp_seq.accept(publisher, sp.header.seq));
         if let Err(e) = r {
             self.counters.refused += 1;
+            self.last_refusal = Some(e);
             return Err(e);
         }
         self.last_tick_value = Some(sp.header.tick);
@@ -228,6 +233,7 @@ impl DynamicsCore {
             } else if !tau[i].is_finite() {
                 // A singular model at this state: refuse rather than forward garbage.
                 self.counters.refused += 1;
+                self.last_refusal = Some(Refusal::NonFinite);
                 return Err(Refusal::NonFinite);
             }
         }
@@ -327,6 +333,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.latency = lat.summary();
         st.peak_torque = core.peak_torque;
         st.motion_time_s = core.last_tick().unwrap_or(0) as f64 / cfg.rate_hz;
+        st.last_input_refusal = core
+            .last_refusal
+            .map_or(microrobot_messages::RefusalReason::None, Refusal::reason)
+            as u32;
     };
     fill(&mut st, &core, &lat, 0);
     status.publish(monotonic_ns(), &mut st);
