@@ -11,6 +11,9 @@ use std::path::{Path, PathBuf};
 
 use toml::{Table, Value};
 
+mod teleop;
+pub use teleop::TeleopConfig;
+
 /// Why a pipeline config was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{file}: {}{message}", key.as_deref().map(|k| format!("{k}: ")).unwrap_or_default())]
@@ -215,6 +218,7 @@ pub struct PipelineConfig {
     pub actuator: ActuatorConfig,
     pub realtime: RealtimeConfig,
     pub supervisor: SupervisorConfig,
+    pub teleop: TeleopConfig,
 }
 
 impl Default for PipelineConfig {
@@ -279,6 +283,7 @@ impl Default for PipelineConfig {
                 on_failure: FailurePolicy::StopAll,
                 max_restarts: 3,
             },
+            teleop: TeleopConfig::default(),
         }
     }
 }
@@ -425,6 +430,7 @@ impl PipelineConfig {
             })
         );
         let _ = writeln!(s, "max_restarts = {}", v.max_restarts);
+        teleop::write_toml(&self.teleop, &mut s);
         s
     }
 }
@@ -638,6 +644,7 @@ impl Reader<'_> {
                 "actuator",
                 "realtime",
                 "supervisor",
+                "teleop",
             ],
         };
         self.check_unknown(&top)?;
@@ -1051,6 +1058,7 @@ impl Reader<'_> {
             actuator,
             realtime,
             supervisor,
+            teleop: self.teleop(root, rate_hz)?,
         })
     }
 }
