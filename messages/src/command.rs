@@ -17,6 +17,9 @@ pub enum CommandKind {
     EStop = 3,
     /// Leave e-stop / safe state; motion resumes bumplessly from the measured state.
     Reset = 4,
+    /// Enter teleop mode (the arm must be at rest): the master device drives the arm
+    /// until a Stop or EStop.
+    Teleop = 5,
 }
 
 impl CommandKind {
@@ -27,6 +30,7 @@ impl CommandKind {
             2 => Some(Self::Stop),
             3 => Some(Self::EStop),
             4 => Some(Self::Reset),
+            5 => Some(Self::Teleop),
             _ => None,
         }
     }

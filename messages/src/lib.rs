@@ -12,11 +12,13 @@
 //! `messages/README.md` for the field-by-field contract, rates and who publishes what.
 
 pub mod command;
+pub mod master;
 pub mod ports;
 pub mod status;
 pub mod stream;
 
 pub use command::{CommandKind, MotionCommand, ProfileKind, TargetSpace};
+pub use master::MasterPose;
 pub use ports::{BusError, ServiceKind, open_event, open_publish_subscribe, service_name};
 pub use status::{LatencySummary, LifecycleState, RefusalReason, ServiceRole, ServiceStatus};
 pub use stream::{

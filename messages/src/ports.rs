@@ -22,16 +22,19 @@ pub enum ServiceKind {
     Command,
     /// [`crate::ServiceStatus`], every service → supervisor and monitors, ~10 Hz.
     Status,
+    /// [`crate::MasterPose`], master device (or `microrobot teleop-source`) → planner.
+    Master,
 }
 
 impl ServiceKind {
     /// Every stream, in pipeline order.
-    pub const ALL: [ServiceKind; 5] = [
+    pub const ALL: [ServiceKind; 6] = [
         Self::Setpoint,
         Self::Torque,
         Self::State,
         Self::Command,
         Self::Status,
+        Self::Master,
     ];
 
     /// The stream's name inside an instance.
@@ -42,6 +45,7 @@ impl ServiceKind {
             Self::State => "state",
             Self::Command => "command",
             Self::Status => "status",
+            Self::Master => "master",
         }
     }
 }

@@ -85,6 +85,8 @@ pub enum RefusalReason {
     CannotPlan = 14,
     NotStarted = 15,
     OutOfOrder = 16,
+    TeleopUnavailable = 17,
+    TeleopNotAtRest = 18,
 }
 
 impl RefusalReason {
@@ -109,6 +111,8 @@ impl RefusalReason {
             14 => CannotPlan,
             15 => NotStarted,
             16 => OutOfOrder,
+            17 => TeleopUnavailable,
+            18 => TeleopNotAtRest,
             _ => return Option::None,
         })
     }
@@ -135,6 +139,8 @@ impl RefusalReason {
             Self::CannotPlan => "no trajectory within the limits",
             Self::NotStarted => "the measured state is not known yet",
             Self::OutOfOrder => "sequence number out of order or duplicated",
+            Self::TeleopUnavailable => "teleop is not available (no [teleop] config or master input)",
+            Self::TeleopNotAtRest => "teleop is entered at rest only; stop the running motion first",
         }
     }
 }

@@ -53,6 +53,22 @@ pub mod setpoint_flags {
     pub const HOLD_FOR_SAFE_STATE: u32 = 1 << 3;
     /// The motion program has completed.
     pub const PROGRAM_DONE: u32 = 1 << 4;
+    /// Teleop mode: the setpoint follows the master device.
+    pub const TELEOP: u32 = 1 << 5;
+    /// Teleop: the clutch is released; the arm is brought to rest and held.
+    pub const TELEOP_CLUTCH_OPEN: u32 = 1 << 6;
+    /// Teleop: no valid master sample within `teleop.master_timeout_ms`; holding.
+    pub const TELEOP_MASTER_STALE: u32 = 1 << 7;
+    /// Teleop: the tool reached the workspace edge (or a joint limit) and stopped there.
+    pub const TELEOP_WORKSPACE_EDGE: u32 = 1 << 8;
+    /// Teleop: near a singularity; the tool's speed limit is reduced.
+    pub const TELEOP_SINGULARITY: u32 = 1 << 9;
+    /// Teleop: an IK solution that would flip the configuration was refused.
+    pub const TELEOP_FLIP_REFUSED: u32 = 1 << 10;
+    /// Teleop: a master sample was refused (not finite, quaternion not unit length).
+    pub const TELEOP_INPUT_REFUSED: u32 = 1 << 11;
+    /// Teleop: the tool's Cartesian velocity or acceleration limit is active.
+    pub const TELEOP_LIMITED: u32 = 1 << 12;
 }
 
 /// Dynamics → actuator: the joint torques (forces for prismatic joints) to apply.

@@ -8,4 +8,6 @@ pub mod send;
 pub mod service;
 pub mod study;
 pub mod supervisor;
+pub mod teleop_report;
+pub mod teleop_source;
 pub mod top;

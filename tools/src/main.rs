@@ -9,7 +9,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, replay};
-use microrobot_cli::{eval_model, eval_trajectory, run, send, service, study, top};
+use microrobot_cli::{
+    eval_model, eval_trajectory, run, send, service, study, teleop_report, teleop_source, top,
+};
 
 #[derive(Parser)]
 #[command(
@@ -30,6 +32,10 @@ enum Command {
     Send(send::SendArgs),
     /// Show live rates, latencies and health of a running pipeline.
     Top(top::TopArgs),
+    /// Stand in for a master device: publish a synthetic or recorded hand motion.
+    TeleopSource(teleop_source::TeleopSourceArgs),
+    /// Tremor attenuation, scaling error, latency and tracking of a teleop pipeline.
+    TeleopReport(teleop_report::TeleopReportArgs),
     /// Regenerate the seed's study (tables, workspace, Jacobian, trajectories, torques, verdicts).
     Study(study::StudyArgs),
     /// Record every stream of a running pipeline to an MCAP file (JSON, Foxglove-ready).
@@ -69,6 +75,8 @@ fn main() -> ExitCode {
         Command::Run(args) => return run::main(args),
         Command::Send(args) => send::main(args),
         Command::Top(args) => top::main(args),
+        Command::TeleopSource(args) => teleop_source::main(args),
+        Command::TeleopReport(args) => teleop_report::main(args),
         Command::Study(args) => study::main(args),
         Command::Record(args) => record::main(args),
         Command::Export(args) => export::main(args),

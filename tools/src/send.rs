@@ -45,6 +45,8 @@ pub enum SendCommand {
     Estop,
     /// Leave e-stop / the safe state; motion resumes from the measured state.
     Reset,
+    /// Enter teleop mode (arm at rest): the master device drives the arm until `stop`.
+    Teleop,
 }
 
 /// Trajectory profile of a move.
@@ -121,6 +123,7 @@ pub fn build_command(args: &SendArgs, robot: Option<&Robot>) -> anyhow::Result<M
         SendCommand::Stop => cmd.kind = CommandKind::Stop as u32,
         SendCommand::Estop => cmd.kind = CommandKind::EStop as u32,
         SendCommand::Reset => cmd.kind = CommandKind::Reset as u32,
+        SendCommand::Teleop => cmd.kind = CommandKind::Teleop as u32,
         SendCommand::Move(m) => {
             cmd.kind = CommandKind::Move as u32;
             cmd.profile = match m.profile {

@@ -130,22 +130,13 @@ fn reach(robot: &Robot) -> f64 {
     r.max(1e-3)
 }
 
-/// Solves for joint positions reaching `target`, starting from `seed`.
-///
-/// Each iteration solves `(J Jᵀ + λ² 1) y = e`, steps `Δq = Jᵀ y` (damped least
-/// squares over the selected rows), clamps into the limits and keeps the step
-/// only if the error drops (λ shrinks) — otherwise λ grows and the step is
-/// retried. Rank deficiency (redundancy, collinear axes, singular poses) only
-/// makes `J Jᵀ` singular, which λ² keeps invertible. If an attempt ends without
-/// convergence, up to `options.restarts` attempts start from pseudo-random
-/// configurations. The best configuration found is returned either way.
-pub fn solve(
+/// Checks the target, the seed and the options; returns the orientation weight (m/rad).
+fn validate(
     robot: &Robot,
-    data: &mut ModelData,
     target: &IkTarget,
     seed: &JointVector,
     options: &IkOptions,
-) -> Result<IkSolution, IkError> {
+) -> Result<f64, IkError> {
     let finite_target = match target {
         IkTarget::Position(p) => p.iter().all(|x| x.is_finite()),
         IkTarget::Pose(iso) => {
@@ -172,12 +163,32 @@ pub fn solve(
             return Err(IkError::BadOption(name));
         }
     }
-    let weight = match options.orientation_weight_m {
-        Some(w) if w > 0.0 && w.is_finite() => w,
-        Some(_) => return Err(IkError::BadOption("orientation_weight_m")),
-        None => reach(robot),
-    };
-    let limits: Vec<_> = robot.joints().iter().map(|j| j.limits).collect();
+    match options.orientation_weight_m {
+        Some(w) if w > 0.0 && w.is_finite() => Ok(w),
+        Some(_) => Err(IkError::BadOption("orientation_weight_m")),
+        None => Ok(reach(robot)),
+    }
+}
+
+/// Solves for joint positions reaching `target`, starting from `seed`.
+///
+/// Each iteration solves `(J Jᵀ + λ² 1) y = e`, steps `Δq = Jᵀ y` (damped least
+/// squares over the selected rows), clamps into the limits and keeps the step
+/// only if the error drops (λ shrinks) — otherwise λ grows and the step is
+/// retried. Rank deficiency (redundancy, collinear axes, singular poses) only
+/// makes `J Jᵀ` singular, which λ² keeps invertible. If an attempt ends without
+/// convergence, up to `options.restarts` attempts start from pseudo-random
+/// configurations. The best configuration found is returned either way.
+pub fn solve(
+    robot: &Robot,
+    data: &mut ModelData,
+    target: &IkTarget,
+    seed: &JointVector,
+    options: &IkOptions,
+) -> Result<IkSolution, IkError> {
+    let weight = validate(robot, target, seed, options)?;
+    let n = robot.dof();
+    let joints = robot.joints();
 
     let mut best: Option<IkSolution> = None;
     let mut total_iterations = 0;
@@ -185,14 +196,15 @@ pub fn solve(
     for attempt in 0..=options.restarts {
         let mut q = JointVector::zeros();
         for i in 0..n {
+            let l = &joints[i].limits;
             q[i] = if attempt == 0 {
-                limits[i].clamp(seed[i])
+                l.clamp(seed[i])
             } else {
                 let u = splitmix(&mut rng);
-                limits[i].min + u * (limits[i].max - limits[i].min)
+                l.min + u * (l.max - l.min)
             };
         }
-        let sol = attempt_solve(robot, data, target, q, options, weight, &limits);
+        let sol = attempt_solve(robot, data, target, q, options, weight);
         total_iterations += sol.iterations;
         let better = match &best {
             None => true,
@@ -221,6 +233,26 @@ pub fn solve(
     Ok(out)
 }
 
+/// The per-cycle entry point (teleoperation, tracking): damped least squares from
+/// `seed` only — no random restarts, so the solution stays on the seed's branch and
+/// never flips configuration by itself — within `options.max_iterations`. Allocates
+/// nothing. `q` is the seed's best improvement even when not converged (at the edge
+/// of the workspace it is the closest point the local descent reaches).
+pub fn solve_local(
+    robot: &Robot,
+    data: &mut ModelData,
+    target: &IkTarget,
+    seed: &JointVector,
+    options: &IkOptions,
+) -> Result<IkSolution, IkError> {
+    let weight = validate(robot, target, seed, options)?;
+    let mut q = JointVector::zeros();
+    for (i, j) in robot.joints().iter().enumerate() {
+        q[i] = j.limits.clamp(seed[i]);
+    }
+    Ok(attempt_solve(robot, data, target, q, options, weight))
+}
+
 fn attempt_solve(
     robot: &Robot,
     data: &mut ModelData,
@@ -228,9 +260,9 @@ fn attempt_solve(
     mut q: JointVector,
     options: &IkOptions,
     weight: f64,
-    limits: &[crate::JointLimits],
 ) -> IkSolution {
     let n = robot.dof();
+    let joints = robot.joints();
     let rows = match target {
         IkTarget::Position(_) => 3,
         IkTarget::Pose(_) => 6,
@@ -262,8 +294,8 @@ fn attempt_solve(
         {
             let e_dir = jac.transpose() * e;
             for i in 0..n {
-                let at_min = q[i] <= limits[i].min && e_dir[i] < 0.0;
-                let at_max = q[i] >= limits[i].max && e_dir[i] > 0.0;
+                let at_min = q[i] <= joints[i].limits.min && e_dir[i] < 0.0;
+                let at_max = q[i] >= joints[i].limits.max && e_dir[i] > 0.0;
                 if (at_min || at_max) && !revolute_full_turn[i] {
                     jac.column_mut(i).fill(0.0);
                 }
@@ -285,7 +317,7 @@ fn attempt_solve(
             };
             let y = chol.solve(&e);
             let dq = jac.transpose() * y;
-            let q_new = step_within_limits(&q, &dq, n, limits, &revolute_full_turn);
+            let q_new = step_within_limits(&q, &dq, joints, &revolute_full_turn);
             update_kinematics(robot, data, &q_new);
             let (e_new, p_new, o_new) = task_error(data, target, weight);
             if e_new.norm() < e.norm() {
@@ -321,15 +353,14 @@ fn attempt_solve(
 fn step_within_limits(
     q: &JointVector,
     dq: &JointVector,
-    n: usize,
-    limits: &[crate::JointLimits],
+    joints: &[crate::Joint],
     revolute_full_turn: &[bool; crate::MAX_JOINTS],
 ) -> JointVector {
     let tau = 2.0 * std::f64::consts::PI;
     let mut out = *q;
-    for i in 0..n {
+    for (i, j) in joints.iter().enumerate() {
         let mut v = q[i] + dq[i];
-        let l = &limits[i];
+        let l = &j.limits;
         if revolute_full_turn[i] && v.is_finite() {
             if v > l.max {
                 v -= tau * ((v - l.max) / tau).ceil();

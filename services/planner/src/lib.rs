@@ -20,15 +20,20 @@
 //!   published setpoint, so a late or skipped tick delays the motion rather than making
 //!   it jump.
 //!
+//! * Teleop: `[teleop] enabled` or a Teleop command (at rest) hands the setpoint to the
+//!   master device (module [`teleop`]); Stop or EStop leave it with a jerk-limited stop.
+//!
 //! The logic lives in [`PlannerCore`] (no IPC).
 
 pub mod program;
+pub mod teleop;
 
 use iceoryx2::prelude::*;
 use microrobot_messages::{
     CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState, MAX_JOINTS,
-    MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole, ServiceStatus,
-    TargetSpace, monotonic_ns, open_event, open_publish_subscribe, setpoint_flags, state_flags,
+    MasterPose, MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole,
+    ServiceStatus, TargetSpace, monotonic_ns, open_event, open_publish_subscribe, setpoint_flags,
+    state_flags,
 };
 use microrobot_model::ik::{IkOptions, IkTarget};
 use microrobot_model::{ModelData, Robot};
@@ -83,6 +88,10 @@ pub enum CommandError {
     Plan(String),
     #[error("the measured state is not known yet")]
     NotStarted,
+    #[error("teleop is not available: {0}")]
+    TeleopUnavailable(String),
+    #[error("teleop is entered at rest only; stop the running motion first")]
+    TeleopNotAtRest,
 }
 
 impl CommandError {
@@ -104,6 +113,8 @@ impl CommandError {
             Self::BadQuaternion => RefusalReason::BadQuaternion,
             Self::Plan(_) => RefusalReason::CannotPlan,
             Self::NotStarted => RefusalReason::NotStarted,
+            Self::TeleopUnavailable(_) => RefusalReason::TeleopUnavailable,
+            Self::TeleopNotAtRest => RefusalReason::TeleopNotAtRest,
         }
     }
 }
@@ -126,6 +137,8 @@ pub enum Mode {
     EStop,
     /// The actuator is in its safe state: following the measured state.
     SafeHold,
+    /// The master device drives the arm.
+    Teleop,
 }
 
 /// Cumulative counters of the planner.
@@ -176,6 +189,8 @@ pub struct PlannerCore {
     pub last_estop_latency_ns: Option<u64>,
     /// The largest such time so far (ns).
     pub max_estop_latency_ns: u64,
+    teleop: teleop::TeleopMode,
+    teleop_at_start: bool,
 }
 
 fn scaled(robot: &Robot, scale: f64) -> KinematicLimits {
@@ -222,7 +237,29 @@ impl PlannerCore {
             auto_resume: cfg.watchdog.auto_resume,
             last_estop_latency_ns: None,
             max_estop_latency_ns: 0,
+            teleop: teleop::TeleopMode::new(robot, cfg, &scaled(robot, cfg.planner.limit_scale)),
+            teleop_at_start: cfg.teleop.enabled,
         }
+    }
+
+    /// Teleop mode (its counters and latency histogram).
+    pub fn teleop(&self) -> &teleop::TeleopMode {
+        &self.teleop
+    }
+
+    /// Takes a master-device sample received at `now_ns` (used in teleop mode only).
+    pub fn on_master(&mut self, m: &MasterPose, now_ns: u64) -> bool {
+        self.teleop.on_master(m, now_ns)
+    }
+
+    fn enter_teleop(&mut self) -> Result<(), CommandError> {
+        self.teleop
+            .enter(&self.current)
+            .map_err(CommandError::TeleopUnavailable)?;
+        self.mode = Mode::Teleop;
+        self.program_done = false;
+        tracing::info!("planner: teleop mode: the master device drives the arm");
+        Ok(())
     }
 
     /// Current mode.
@@ -276,7 +313,16 @@ impl PlannerCore {
                 q,
                 ..Default::default()
             };
-            self.start_program();
+            if self.teleop_at_start {
+                if self.program.take().is_some() {
+                    tracing::warn!("planner: teleop.enabled: the program is not run");
+                }
+                if let Err(e) = self.enter_teleop() {
+                    tracing::error!("planner: cannot start in teleop mode: {e}");
+                }
+            } else {
+                self.start_program();
+            }
         }
         true
     }
@@ -394,6 +440,16 @@ impl PlannerCore {
                 self.check_motion_allowed()?;
                 self.abandon_program();
                 self.brake(false)
+            }
+            CommandKind::Teleop => {
+                self.check_motion_allowed()?;
+                if self.mode == Mode::Teleop {
+                    return Ok(());
+                }
+                if self.motion.is_some() || self.program_running {
+                    return Err(CommandError::TeleopNotAtRest);
+                }
+                self.enter_teleop()
             }
             CommandKind::Move => {
                 self.check_motion_allowed()?;
@@ -564,7 +620,7 @@ impl PlannerCore {
         }
         if !self.lockstep
             && check_fresh(s.header.stamp_ns, now_ns, self.stale_ns).is_err()
-            && matches!(self.mode, Mode::Moving)
+            && matches!(self.mode, Mode::Moving | Mode::Teleop)
         {
             self.counters.stale_cycles += 1;
             tracing::warn!("planner: measured state is stale; stopping");
@@ -586,6 +642,14 @@ impl PlannerCore {
                 self.current = m;
             }
             flags |= setpoint_flags::HOLD_FOR_SAFE_STATE;
+        } else if self.mode == Mode::Teleop {
+            if let Some((sample, bits)) = self.teleop.step(now_ns) {
+                self.current = sample;
+                flags |= bits;
+                if (0..self.dof).any(|i| sample.qd[i] != 0.0 || sample.qdd[i] != 0.0) {
+                    flags |= setpoint_flags::MOVING;
+                }
+            }
         } else {
             let step = if self.program_running {
                 self.program.as_mut().and_then(|p| p.update(self.period_s))
@@ -622,7 +686,10 @@ impl PlannerCore {
             }
             _ => {}
         }
-        if self.program.is_none() && self.motion.is_none() && self.mode != Mode::SafeHold {
+        if self.program.is_none()
+            && self.motion.is_none()
+            && !matches!(self.mode, Mode::SafeHold | Mode::Teleop)
+        {
             self.program_done = true;
         }
         if self.program_done {
@@ -715,6 +782,11 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .listener_builder()
         .create()
         .map_err(|e| err("command listener")(&e))?;
+    let master_sub = open_publish_subscribe::<MasterPose>(&node, inst, ServiceKind::Master)?
+        .subscriber_builder()
+        .history_request(1)
+        .create()
+        .map_err(|e| err("master subscriber")(&e))?;
     let mut status = StatusPort::open(&node, inst, ServiceRole::Planner, cfg.status_period_ms)?;
 
     let mut core = PlannerCore::new(&robot, cfg, program);
@@ -867,6 +939,12 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 }
             }
         }
+        // Master samples: the newest valid one is used at the next tick.
+        while let Ok(Some(s)) = master_sub.receive() {
+            let m = *s;
+            drop(s);
+            core.on_master(&m, monotonic_ns());
+        }
         // States: ticking on states, each one is a tick; otherwise keep the newest.
         if fired[0] || !on_states {
             if let Some(l) = &st_listener {
@@ -915,5 +993,19 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     }
     fill(&mut st, &core, &lateness, &ticker, state_clock_misses);
     status.publish_final(&mut st);
+    let t = core.teleop();
+    if t.counters.samples > 0 || t.counters.refused > 0 {
+        let l = t.latency.summary();
+        tracing::info!(
+            "planner: teleop: {} master samples, {} refused, {} stale cycles, {} flips refused, {} cycles at the workspace edge; master sample -> setpoint p50 {:.1} us, p99 {:.1} us",
+            t.counters.samples,
+            t.counters.refused,
+            t.counters.stale_cycles,
+            t.counters.flips_refused,
+            t.counters.edge_cycles,
+            l.p50_ns as f64 / 1e3,
+            l.p99_ns as f64 / 1e3
+        );
+    }
     Ok(())
 }

@@ -11,6 +11,9 @@ use std::path::{Path, PathBuf};
 
 use toml::{Table, Value};
 
+mod teleop;
+pub use teleop::TeleopConfig;
+
 /// Why a pipeline config was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{file}: {}{message}", key.as_deref().map(|k| format!("{k}: ")).unwrap_or_default())]
@@ -227,6 +230,7 @@ pub struct PipelineConfig {
     pub actuator: ActuatorConfig,
     pub realtime: RealtimeConfig,
     pub supervisor: SupervisorConfig,
+    pub teleop: TeleopConfig,
 }
 
 impl Default for PipelineConfig {
@@ -292,6 +296,7 @@ impl Default for PipelineConfig {
                 on_failure: FailurePolicy::StopAll,
                 max_restarts: 3,
             },
+            teleop: TeleopConfig::default(),
         }
     }
 }
@@ -452,6 +457,7 @@ impl PipelineConfig {
             })
         );
         let _ = writeln!(s, "max_restarts = {}", v.max_restarts);
+        teleop::write_toml(&self.teleop, &mut s);
         s
     }
 }
@@ -665,6 +671,7 @@ impl Reader<'_> {
                 "actuator",
                 "realtime",
                 "supervisor",
+                "teleop",
             ],
         };
         self.check_unknown(&top)?;
@@ -1088,6 +1095,7 @@ impl Reader<'_> {
             actuator,
             realtime,
             supervisor,
+            teleop: self.teleop(root, rate_hz)?,
         })
     }
 }

@@ -1,0 +1,213 @@
+//! `[teleop]`: the planner's teleoperation mode (a master device drives the arm).
+
+use std::fmt::Write as _;
+
+use toml::Table;
+
+use super::{Reader, Res, fmt_f64};
+
+/// `[teleop]`, converted to SI at load.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TeleopConfig {
+    /// Start the planner in teleop mode (else `microrobot send teleop` enters it).
+    pub enabled: bool,
+    /// Hand displacement / tool displacement (3 = 3:1).
+    pub ratio: f64,
+    /// Orientation of the master device's frame in the robot's base frame: roll, pitch,
+    /// yaw about fixed x, y, z (rad; `frame_rpy_deg` in the file).
+    pub frame_rpy: [f64; 3],
+    /// Tremor filter: Butterworth low-pass order (2, 4, 6, 8).
+    pub filter_order: u32,
+    /// Tremor filter cutoff (Hz).
+    pub filter_cutoff_hz: f64,
+    /// Tool speed limit (m/s; `max_tool_vel_mm_s`).
+    pub max_tool_velocity: f64,
+    /// Tool acceleration limit (m/s²; `max_tool_acc_mm_s2`).
+    pub max_tool_acceleration: f64,
+    /// No valid master sample for this long: the tool is brought to rest and held (ms).
+    pub master_timeout_ms: f64,
+    /// Smallest singular value of the position Jacobian below which the tool slows
+    /// (m/rad; `singularity_sigma_mm` in mm/rad).
+    pub singularity_sigma: f64,
+    /// Largest joint change of one IK solution per cycle before it counts as a
+    /// configuration flip and is refused (rad; `flip_threshold_deg`).
+    pub flip_threshold: f64,
+    /// IK residual above which the target is outside the workspace (m; `workspace_tolerance_mm`).
+    pub workspace_tolerance: f64,
+}
+
+impl Default for TeleopConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            ratio: 3.0,
+            frame_rpy: [0.0; 3],
+            filter_order: 4,
+            filter_cutoff_hz: 4.0,
+            max_tool_velocity: 0.05,
+            max_tool_acceleration: 0.5,
+            master_timeout_ms: 50.0,
+            singularity_sigma: 0.01,
+            flip_threshold: 2f64.to_radians(),
+            workspace_tolerance: 1e-5,
+        }
+    }
+}
+
+impl Reader<'_> {
+    pub(super) fn teleop(&self, root: &Table, rate_hz: f64) -> Res<TeleopConfig> {
+        let t = self.tab(
+            root,
+            "",
+            "teleop",
+            &[
+                "enabled",
+                "ratio",
+                "frame_rpy_deg",
+                "filter_order",
+                "filter_cutoff_hz",
+                "max_tool_vel_mm_s",
+                "max_tool_acc_mm_s2",
+                "master_timeout_ms",
+                "singularity_sigma_mm",
+                "flip_threshold_deg",
+                "workspace_tolerance_mm",
+            ],
+        )?;
+        let d = TeleopConfig::default();
+        let frame_rpy = match self.get(&t, "frame_rpy_deg") {
+            None => d.frame_rpy,
+            Some(toml::Value::Array(items)) if items.len() == 3 => {
+                let mut out = [0.0; 3];
+                for (i, it) in items.iter().enumerate() {
+                    let k = format!("teleop.frame_rpy_deg[{i}]");
+                    let v = match it {
+                        toml::Value::Float(v) => *v,
+                        toml::Value::Integer(v) => *v as f64,
+                        _ => return Err(self.err(&k, "expected a number")),
+                    };
+                    if !(v.is_finite() && v.abs() <= 360.0) {
+                        return Err(
+                            self.err(&k, format!("{v} must be a finite angle in [-360, 360] deg"))
+                        );
+                    }
+                    out[i] = v.to_radians();
+                }
+                out
+            }
+            Some(_) => {
+                return Err(self.err(
+                    "teleop.frame_rpy_deg",
+                    "expected 3 numbers: roll, pitch, yaw (deg)",
+                ));
+            }
+        };
+        let filter_order = self.u64_in(&t, "filter_order", d.filter_order as u64, 2, 8)? as u32;
+        if !filter_order.is_multiple_of(2) {
+            return Err(self.err(
+                "teleop.filter_order",
+                format!("{filter_order} must be 2, 4, 6 or 8"),
+            ));
+        }
+        let ms = 1e-3;
+        Ok(TeleopConfig {
+            enabled: self.bool(&t, "enabled", d.enabled)?,
+            ratio: self.f64_in(&t, "ratio", d.ratio, 0.1, 100.0, false)?,
+            frame_rpy,
+            filter_order,
+            filter_cutoff_hz: self.f64_in(
+                &t,
+                "filter_cutoff_hz",
+                d.filter_cutoff_hz,
+                0.0,
+                0.45 * rate_hz,
+                true,
+            )?,
+            max_tool_velocity: self.f64_in(
+                &t,
+                "max_tool_vel_mm_s",
+                d.max_tool_velocity / ms,
+                0.0,
+                10_000.0,
+                true,
+            )? * ms,
+            max_tool_acceleration: self.f64_in(
+                &t,
+                "max_tool_acc_mm_s2",
+                d.max_tool_acceleration / ms,
+                0.0,
+                1.0e6,
+                true,
+            )? * ms,
+            master_timeout_ms: self.f64_in(
+                &t,
+                "master_timeout_ms",
+                d.master_timeout_ms,
+                0.0,
+                60_000.0,
+                true,
+            )?,
+            singularity_sigma: self.f64_in(
+                &t,
+                "singularity_sigma_mm",
+                d.singularity_sigma / ms,
+                0.0,
+                10_000.0,
+                false,
+            )? * ms,
+            flip_threshold: self
+                .f64_in(
+                    &t,
+                    "flip_threshold_deg",
+                    d.flip_threshold.to_degrees(),
+                    0.0,
+                    180.0,
+                    true,
+                )?
+                .to_radians(),
+            workspace_tolerance: self.f64_in(
+                &t,
+                "workspace_tolerance_mm",
+                d.workspace_tolerance / ms,
+                0.0,
+                100.0,
+                true,
+            )? * ms,
+        })
+    }
+}
+
+/// Appends `[teleop]` to `s` in the file's units.
+pub(super) fn write_toml(t: &TeleopConfig, s: &mut String) {
+    let f = fmt_f64;
+    let _ = writeln!(s, "\n[teleop]");
+    let _ = writeln!(s, "enabled = {}", t.enabled);
+    let _ = writeln!(s, "ratio = {}", f(t.ratio));
+    let _ = writeln!(
+        s,
+        "frame_rpy_deg = [{}, {}, {}]",
+        f(t.frame_rpy[0].to_degrees()),
+        f(t.frame_rpy[1].to_degrees()),
+        f(t.frame_rpy[2].to_degrees())
+    );
+    let _ = writeln!(s, "filter_order = {}", t.filter_order);
+    let _ = writeln!(s, "filter_cutoff_hz = {}", f(t.filter_cutoff_hz));
+    let _ = writeln!(s, "max_tool_vel_mm_s = {}", f(t.max_tool_velocity * 1e3));
+    let _ = writeln!(
+        s,
+        "max_tool_acc_mm_s2 = {}",
+        f(t.max_tool_acceleration * 1e3)
+    );
+    let _ = writeln!(s, "master_timeout_ms = {}", f(t.master_timeout_ms));
+    let _ = writeln!(s, "singularity_sigma_mm = {}", f(t.singularity_sigma * 1e3));
+    let _ = writeln!(
+        s,
+        "flip_threshold_deg = {}",
+        f(t.flip_threshold.to_degrees())
+    );
+    let _ = writeln!(
+        s,
+        "workspace_tolerance_mm = {}",
+        f(t.workspace_tolerance * 1e3)
+    );
+}
