@@ -191,6 +191,8 @@ pub struct PlannerCore {
     pub max_estop_latency_ns: u64,
     teleop: teleop::TeleopMode,
     teleop_at_start: bool,
+    /// The measured state was stale at the last check (teleop holds meanwhile).
+    state_stale: bool,
 }
 
 fn scaled(robot: &Robot, scale: f64) -> KinematicLimits {
@@ -239,6 +241,7 @@ impl PlannerCore {
             max_estop_latency_ns: 0,
             teleop: teleop::TeleopMode::new(robot, cfg, &scaled(robot, cfg.planner.limit_scale)),
             teleop_at_start: cfg.teleop.enabled,
+            state_stale: false,
         }
     }
 
@@ -618,9 +621,14 @@ impl PlannerCore {
             }
             return;
         }
-        if !self.lockstep
+        self.state_stale =
+            !self.lockstep && check_fresh(s.header.stamp_ns, now_ns, self.stale_ns).is_err();
+        if self.state_stale && self.mode == Mode::Teleop {
+            // Teleop holds (the tool is brought to rest) until the state is fresh again.
+            self.counters.stale_cycles += 1;
+        } else if !self.lockstep
             && check_fresh(s.header.stamp_ns, now_ns, self.stale_ns).is_err()
-            && matches!(self.mode, Mode::Moving | Mode::Teleop)
+            && matches!(self.mode, Mode::Moving)
         {
             self.counters.stale_cycles += 1;
             tracing::warn!("planner: measured state is stale; stopping");
@@ -643,7 +651,7 @@ impl PlannerCore {
             }
             flags |= setpoint_flags::HOLD_FOR_SAFE_STATE;
         } else if self.mode == Mode::Teleop {
-            if let Some((sample, bits)) = self.teleop.step(now_ns) {
+            if let Some((sample, bits)) = self.teleop.step(now_ns, self.state_stale) {
                 self.current = sample;
                 flags |= bits;
                 if (0..self.dof).any(|i| sample.qd[i] != 0.0 || sample.qdd[i] != 0.0) {

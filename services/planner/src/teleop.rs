@@ -128,11 +128,13 @@ impl TeleopMode {
     }
 
     /// One cycle at `now_ns`: the new setpoint and its flags (TELEOP and the rest).
-    pub fn step(&mut self, now_ns: u64) -> Option<(Sample, u32)> {
+    /// `hold` (the measured state is stale) brings the tool to rest as a stale master
+    /// does; teleop continues once it is fresh again.
+    pub fn step(&mut self, now_ns: u64, hold: bool) -> Option<(Sample, u32)> {
         let c = self.controller.as_mut().ok()?;
         let fresh = self
             .latest
-            .filter(|m| now_ns.saturating_sub(m.stamp_ns) <= self.timeout_ns);
+            .filter(|m| !hold && now_ns.saturating_sub(m.stamp_ns) <= self.timeout_ns);
         let hand = fresh.map(|m| Hand {
             position: Vector3::from(m.position),
             clutch: m.clutch == 1,
