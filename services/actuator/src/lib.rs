@@ -14,6 +14,7 @@
 //! sampled loop runs exactly the code the process runs.
 
 pub mod backend;
+pub mod resume;
 pub mod safety;
 pub mod sim;
 
@@ -33,6 +34,7 @@ use microrobot_runtime::watchdog::{Freshness, Watchdog};
 use microrobot_runtime::{BadConfig, PeriodicClock, Shutdown, StatusPort, open_node, waitset};
 
 pub use backend::{ActuatorBackend, BackendError, Measured};
+pub use resume::{RESUME_ENV, ResumeState};
 pub use safety::{Mode, Safety};
 pub use sim::SimArm;
 
@@ -231,6 +233,25 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         did
     }
 
+    /// A restart: continues from `tau`, the torque the predecessor applied last (blended,
+    /// never a step), and with `latch` comes up in the safe state, holding the measured
+    /// position, active, until a Reset (or `auto_resume` on fresh commands).
+    pub fn resume_after_restart(&mut self, tau: &JointVector, latch: bool) {
+        let mut t = *tau;
+        for i in self.dof..t.len() {
+            t[i] = 0.0;
+        }
+        self.safety.blend_from(&t);
+        if latch {
+            if self.backend.lifecycle() == LifecycleState::Inactive {
+                let _ = self.backend.activate();
+            }
+            self.counters.faults += 1;
+            self.safety.on_fault(&self.last_measured.q);
+            // `on_fault` blends from the last applied torque, which is `t`.
+        }
+    }
+
     /// Whether the plant is stepped by the actuator's own timer (free-running, or the
     /// safe state in lockstep).
     pub fn steps_on_timer(&self) -> bool {
@@ -405,10 +426,24 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("setpoint subscriber: {e:?}"))?;
     let mut status = StatusPort::open(&node, inst, ServiceRole::Actuator, cfg.status_period_ms)?;
 
-    // Resume where the arm is: a running planner's last setpoint (restart), else the config.
+    // Resume where the arm is: the predecessor's last published state (handed over by
+    // the supervisor after a restart), else a running planner's last setpoint, else the
+    // config.
+    let resume = ResumeState::from_env(&robot).map_err(BadConfig)?;
     let mut q0 = initial_q(&robot, cfg);
+    if let Some(r) = &resume {
+        q0 = r.q;
+        tracing::info!(
+            "actuator: restarted; resuming the arm at its last published state{}",
+            if cfg.watchdog.auto_resume {
+                ""
+            } else {
+                " in the safe state (send a reset to resume)"
+            }
+        );
+    }
     let probe_end = monotonic_ns() + RESUME_PROBE_MS * 1_000_000;
-    'probe: while monotonic_ns() < probe_end && !shutdown.is_requested() {
+    'probe: while resume.is_none() && monotonic_ns() < probe_end && !shutdown.is_requested() {
         while let Ok(Some(s)) = sp_sub.receive() {
             if s.dof as usize == dof && microrobot_messages::all_finite(&s.q, s.dof) {
                 q0 = JointVector::from_column_slice(&s.q);
@@ -420,8 +455,14 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     }
     drop(sp_sub);
 
-    let sim = SimArm::new(&robot, &cfg.actuator.sim, &q0);
+    let mut sim = SimArm::new(&robot, &cfg.actuator.sim, &q0);
+    if let Some(r) = &resume {
+        sim.set_state(&r.q, &r.qd);
+    }
     let mut core = ActuatorCore::new(sim, &robot, cfg).context("simulated arm")?;
+    if let Some(r) = &resume {
+        core.resume_after_restart(&r.tau, !cfg.watchdog.auto_resume);
+    }
     let mut e2e = LatencyHistogram::new();
 
     let PeriodicClock { timer, mut ticker } =

@@ -197,8 +197,13 @@ impl DynamicsCore {
                 // previous torque); with delay compensation it is first predicted to the
                 // setpoint's time under the desired acceleration.
                 // Free-running, the state may be more than one tick old (after a missed
-                // tick the planner catches up): predict over the actual tick distance.
-                let ticks = sp.header.tick.saturating_sub(s.header.tick).clamp(1, 10);
+                // tick the planner catches up), or as new as the setpoint or newer (the
+                // actuator kept stepping while the planner was held up, e.g. by a host
+                // stall, and the planner now catches up): predict over the actual, signed,
+                // tick distance, so the error is taken at the setpoint's time (a state 20
+                // ticks ahead predicted one tick further gave a 20-tick "error" and a
+                // torque step; found by `microrobot soak`).
+                let ticks = (sp.header.tick as i64 - s.header.tick as i64).clamp(-10, 10);
                 let h = if self.predict {
                     self.period_s * ticks as f64
                 } else {

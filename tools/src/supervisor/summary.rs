@@ -5,17 +5,18 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use microrobot_messages::{LatencySummary, LifecycleState, MAX_JOINTS, ServiceRole, ServiceStatus};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::monitor::slot;
 
 /// Latency percentiles in µs.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct Percentiles {
     pub count: u64,
     pub p50: f64,
     pub p99: f64,
     pub p999: f64,
+    pub p9999: f64,
     pub max: f64,
 }
 
@@ -27,13 +28,14 @@ impl From<&LatencySummary> for Percentiles {
             p50: us(l.p50_ns),
             p99: us(l.p99_ns),
             p999: us(l.p999_ns),
+            p9999: us(l.p9999_ns),
             max: us(l.max_ns),
         }
     }
 }
 
 /// One service over the whole run.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ServiceSummary {
     pub cycles: u64,
     pub deadline_misses: u64,
@@ -57,7 +59,7 @@ pub struct ServiceSummary {
 }
 
 /// Everything `microrobot run` reports at the end.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
     pub instance: String,
     pub exit_ok: bool,
