@@ -33,7 +33,16 @@ fn a_move_arriving_mid_motion_replans_without_a_jump() {
         all.extend_from_slice(args);
         run(&all, 60.0)
     };
-    let first = send(&["move", "--deg", "--joints", "30,30,30,30,30,30"]);
+    // Stretched to 6 s, so the second move arrives mid-motion even when a loaded machine
+    // delays it by seconds.
+    let first = send(&[
+        "move",
+        "--deg",
+        "--joints",
+        "30,30,30,30,30,30",
+        "--duration",
+        "6",
+    ]);
     assert_eq!(first.code(), Some(0), "first move: {}", first.stderr);
     std::thread::sleep(Duration::from_millis(800));
     let second = send(&["move", "--deg", "--joints", "10,10,10,10,10,10"]);

@@ -99,13 +99,35 @@ fn task_error(data: &ModelData, target: &IkTarget, weight: f64) -> (SVector<f64,
         IkTarget::Pose(iso) => {
             let dp = iso.translation.vector - tool.translation;
             let r_t: Matrix3<f64> = *iso.rotation.to_rotation_matrix().matrix();
-            let r_err = Rotation3::from_matrix_unchecked(r_t * tool.rotation.transpose());
-            let w = r_err.scaled_axis();
+            let w = rotation_error(&(r_t * tool.rotation.transpose()));
             e.fixed_rows_mut::<3>(0).copy_from(&dp);
             e.fixed_rows_mut::<3>(3).copy_from(&(w * weight));
             (e, dp.norm(), w.norm())
         }
     }
+}
+
+/// The rotation vector θ·axis of the rotation matrix `r`, accurate to rounding at
+/// small angles: θ = atan2(|v|, (tr r − 1)/2) with v = vee(r − rᵀ)/2 = sin θ · axis.
+/// (`acos((tr r − 1)/2)`, as nalgebra's `scaled_axis` computes θ, cannot resolve angles
+/// below ~2e-8 rad, which kept IK from converging to its 1e-9 rad tolerance.)
+/// Beyond 90° the skew part loses the axis; nalgebra's form is exact enough there.
+fn rotation_error(r: &Matrix3<f64>) -> Vector3<f64> {
+    let v = 0.5
+        * Vector3::new(
+            r[(2, 1)] - r[(1, 2)],
+            r[(0, 2)] - r[(2, 0)],
+            r[(1, 0)] - r[(0, 1)],
+        );
+    let c = 0.5 * (r.trace() - 1.0);
+    if c < 0.0 {
+        return Rotation3::from_matrix_unchecked(*r).scaled_axis();
+    }
+    let s = v.norm();
+    if s == 0.0 {
+        return Vector3::zeros();
+    }
+    v * (s.atan2(c) / s)
 }
 
 /// Splitmix64: a tiny reproducible generator for restart seeds.
