@@ -61,6 +61,90 @@ impl LifecycleState {
     }
 }
 
+/// Why a service refused an input (`ServiceStatus::last_command_refusal`,
+/// `ServiceStatus::last_input_refusal`), so a tool can say what was wrong without
+/// reading the service's log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RefusalReason {
+    /// Nothing refused yet.
+    None = 0,
+    UnknownKind = 1,
+    UnknownProfile = 2,
+    UnknownSpace = 3,
+    WrongDof = 4,
+    NonFinite = 5,
+    OutOfLimits = 6,
+    BadDuration = 7,
+    BadLimitScale = 8,
+    Stale = 9,
+    EStopActive = 10,
+    SafeStateActive = 11,
+    Unreachable = 12,
+    BadQuaternion = 13,
+    CannotPlan = 14,
+    NotStarted = 15,
+    OutOfOrder = 16,
+    TeleopUnavailable = 17,
+    TeleopNotAtRest = 18,
+}
+
+impl RefusalReason {
+    /// Decodes the wire value, `None` (the Option) for an unknown value.
+    pub fn from_wire(v: u32) -> Option<Self> {
+        use RefusalReason::*;
+        Some(match v {
+            0 => None,
+            1 => UnknownKind,
+            2 => UnknownProfile,
+            3 => UnknownSpace,
+            4 => WrongDof,
+            5 => NonFinite,
+            6 => OutOfLimits,
+            7 => BadDuration,
+            8 => BadLimitScale,
+            9 => Stale,
+            10 => EStopActive,
+            11 => SafeStateActive,
+            12 => Unreachable,
+            13 => BadQuaternion,
+            14 => CannotPlan,
+            15 => NotStarted,
+            16 => OutOfOrder,
+            17 => TeleopUnavailable,
+            18 => TeleopNotAtRest,
+            _ => return Option::None,
+        })
+    }
+
+    /// What was wrong, in words.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::None => "nothing refused",
+            Self::UnknownKind => "unknown command kind",
+            Self::UnknownProfile => "unknown trajectory profile",
+            Self::UnknownSpace => "unknown target space",
+            Self::WrongDof => "joint count does not match the robot's",
+            Self::NonFinite => "a value is not finite (NaN or infinity)",
+            Self::OutOfLimits => "a target or value is outside the joint limits",
+            Self::BadDuration => "impossible duration",
+            Self::BadLimitScale => "limit scale outside (0, 1]",
+            Self::Stale => "stale timestamp (too old, or from the future)",
+            Self::EStopActive => "motion is refused during an e-stop; send reset first",
+            Self::SafeStateActive => {
+                "motion is refused while the actuator is in its safe state; send reset first"
+            }
+            Self::Unreachable => "the Cartesian target is unreachable",
+            Self::BadQuaternion => "the quaternion is not unit length",
+            Self::CannotPlan => "no trajectory within the limits",
+            Self::NotStarted => "the measured state is not known yet",
+            Self::OutOfOrder => "sequence number out of order or duplicated",
+            Self::TeleopUnavailable => "teleop is not available (no [teleop] config or master input)",
+            Self::TeleopNotAtRest => "teleop is entered at rest only; stop the running motion first",
+        }
+    }
+}
+
 /// Percentiles of a latency histogram, in ns (0 when no sample yet).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
@@ -126,4 +210,16 @@ pub struct ServiceStatus {
     pub tracking_error_max: [f64; crate::MAX_JOINTS],
     /// Largest |τ| commanded per joint so far.
     pub peak_torque: [f64; crate::MAX_JOINTS],
+    /// Planner: e-stop commands executed (0 elsewhere).
+    pub estops: u64,
+    /// Planner: time from the receipt of the last e-stop command to its first braking
+    /// setpoint, in ns (0: no e-stop yet).
+    pub estop_latency_ns: u64,
+    /// Planner: the largest such time so far, in ns.
+    pub estop_latency_max_ns: u64,
+    /// Planner: why the last refused motion command was refused (a [`RefusalReason`]).
+    pub last_command_refusal: u32,
+    /// Why the last refused bus message (setpoint, torque or state) was refused (a
+    /// [`RefusalReason`]).
+    pub last_input_refusal: u32,
 }

@@ -31,6 +31,19 @@ fn torque_and_state_layouts_are_stable() {
 }
 
 #[test]
+fn status_layout_is_stable() {
+    assert_eq!(offset_of!(ServiceStatus, latency), 136);
+    assert_eq!(offset_of!(ServiceStatus, peak_torque), 136 + 48 + 64);
+    assert_eq!(offset_of!(ServiceStatus, estops), 312);
+    assert_eq!(offset_of!(ServiceStatus, estop_latency_ns), 320);
+    assert_eq!(offset_of!(ServiceStatus, estop_latency_max_ns), 328);
+    assert_eq!(offset_of!(ServiceStatus, last_command_refusal), 336);
+    assert_eq!(offset_of!(ServiceStatus, last_input_refusal), 340);
+    assert_eq!(size_of::<ServiceStatus>(), 344);
+    assert_eq!(align_of::<ServiceStatus>(), 8);
+}
+
+#[test]
 fn command_layout_is_stable() {
     assert_eq!(offset_of!(MotionCommand, target), 32);
     assert_eq!(offset_of!(MotionCommand, duration_s), 32 + 64);
@@ -53,6 +66,12 @@ fn wire_enums_round_trip_and_refuse_unknown_values() {
     assert_eq!(TargetSpace::from_wire(3), None);
     assert_eq!(ServiceRole::from_wire(4), None);
     assert_eq!(LifecycleState::from_wire(5), None);
+    for v in 0..=16 {
+        let r = RefusalReason::from_wire(v).expect("known reason");
+        assert_eq!(r as u32, v);
+        assert!(!r.describe().is_empty());
+    }
+    assert_eq!(RefusalReason::from_wire(17), None);
 }
 
 #[test]

@@ -3,6 +3,8 @@
 //! from the test process, read the summary.
 #![allow(dead_code)]
 
+pub mod continuity;
+
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -400,4 +402,43 @@ pub fn remaining_nodes(instance: &str) -> Vec<String> {
 pub fn alive(pid: i32) -> bool {
     // SAFETY: signal 0 only checks existence.
     unsafe { libc::kill(pid, 0) == 0 }
+}
+
+/// The pid of the ready `role` service of `instance`, from a short look at the status
+/// stream (statuses come at ~10 Hz); `None` if none reported.
+pub fn pid_of(instance: &str, role: ServiceRole) -> Option<i32> {
+    let rec = Recorder::start_statuses(instance);
+    std::thread::sleep(Duration::from_millis(300));
+    rec.finish()
+        .statuses
+        .iter()
+        .rev()
+        .find(|s| s.role == role as u32 && s.ready == 1)
+        .map(|s| s.pid as i32)
+}
+
+/// Waits until a `role` service other than `old_pid` reports ready (a restart), guard
+/// `guard_s`; returns its pid.
+pub fn wait_restarted(instance: &str, role: ServiceRole, old_pid: i32, guard_s: f64) -> i32 {
+    let t0 = Instant::now();
+    loop {
+        if let Some(p) = pid_of(instance, role)
+            && p != old_pid
+        {
+            return p;
+        }
+        assert!(
+            t0.elapsed().as_secs_f64() < guard_s,
+            "{} of `{instance}` not restarted within {guard_s} s",
+            role.name()
+        );
+    }
+}
+
+/// `microrobot send --instance <instance> --config <config> <args>` to the end.
+pub fn send(instance: &str, config: &Path, args: &[&str]) -> Finished {
+    let cfg = config.to_str().expect("utf-8 path");
+    let mut all = vec!["send", "--instance", instance, "--config", cfg];
+    all.extend_from_slice(args);
+    run(&all, 60.0)
 }

@@ -6,6 +6,7 @@ pub mod recording;
 pub mod run;
 pub mod send;
 pub mod service;
+pub mod soak;
 pub mod study;
 pub mod supervisor;
 pub mod teleop_report;

@@ -10,7 +10,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, replay};
 use microrobot_cli::{
-    eval_model, eval_trajectory, run, send, service, study, teleop_report, teleop_source, top,
+    eval_model, eval_trajectory, run, send, service, soak, study, teleop_report, teleop_source,
+    top,
 };
 
 #[derive(Parser)]
@@ -28,6 +29,8 @@ struct Cli {
 enum Command {
     /// Start the planner, dynamics and actuator processes headless and supervise them.
     Run(run::RunArgs),
+    /// Run the pipeline for minutes to hours with injected faults and write a soak report.
+    Soak(soak::SoakArgs),
     /// Send a motion command (move, stop, estop, reset) to a running pipeline.
     Send(send::SendArgs),
     /// Show live rates, latencies and health of a running pipeline.
@@ -73,6 +76,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(args) => return run::main(args),
+        Command::Soak(args) => return soak::main(args),
         Command::Send(args) => send::main(args),
         Command::Top(args) => top::main(args),
         Command::TeleopSource(args) => teleop_source::main(args),

@@ -25,6 +25,7 @@ use microrobot_runtime::{PipelineConfig, exit_code};
 use crate::supervisor::instance::{self, InstanceInUse};
 use crate::supervisor::monitor::{ROLES, StatusMonitor, slot};
 use crate::supervisor::process::{Launch, Service, describe, log_tail};
+use crate::supervisor::state_tap::StateTap;
 use crate::supervisor::summary::{RunFacts, Summary, fold, lifecycle_name};
 
 /// Options of `microrobot run`; each override replaces the config file's key.
@@ -71,7 +72,14 @@ pub struct RunArgs {
 
 /// Runs the pipeline; the exit code is one of [`exit_code`].
 pub fn main(args: RunArgs) -> ExitCode {
-    match supervise(&args) {
+    let result = supervise_with(&args, &mut NoHooks).and_then(|(code, summary)| {
+        println!("{}", summary.render());
+        if let Some(path) = &args.summary_json {
+            write_summary_json(&summary, path).map_err(fail(exit_code::FAILURE))?;
+        }
+        Ok(code)
+    });
+    match result {
         Ok(code) => ExitCode::from(code),
         Err(Failure { code, error }) => {
             eprintln!("error: {error:#}");
@@ -80,10 +88,85 @@ pub fn main(args: RunArgs) -> ExitCode {
     }
 }
 
+/// Writes `summary` as pretty JSON to `path`.
+pub fn write_summary_json(summary: &Summary, path: &Path) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(summary).context("cannot serialise the summary")?;
+    std::fs::write(path, text + "\n").with_context(|| format!("cannot write {}", path.display()))
+}
+
 /// An error with the exit code it maps to.
-struct Failure {
-    code: u8,
-    error: anyhow::Error,
+#[derive(Debug)]
+pub struct Failure {
+    pub code: u8,
+    pub error: anyhow::Error,
+}
+
+/// What another command (`microrobot soak`) plugs into the supervision loop; every
+/// method has a do-nothing default.
+pub trait Hooks {
+    /// After the cleanup of an earlier run, before the first service starts (open
+    /// observers here so they see the first message).
+    fn before_start(&mut self, _cfg: &PipelineConfig) -> anyhow::Result<()> {
+        Ok(())
+    }
+    /// Every supervision loop iteration (~50 Hz) once every service was ready.
+    fn poll(&mut self, _ctl: &mut Control<'_>) {}
+    /// A dead service is about to be started again; for the actuator, `resume` is the
+    /// state it is handed to resume from.
+    fn restarting(
+        &mut self,
+        _role: ServiceRole,
+        _resume: Option<&microrobot_messages::JointState>,
+    ) {
+    }
+    /// Appended to the progress line.
+    fn progress(&self) -> String {
+        String::new()
+    }
+}
+
+/// `microrobot run` itself: no hooks.
+pub struct NoHooks;
+
+impl Hooks for NoHooks {}
+
+/// What [`Hooks::poll`] may look at and do.
+pub struct Control<'a> {
+    pipe: &'a mut Pipeline,
+    /// Latest statuses.
+    pub monitor: &'a StatusMonitor,
+    note: &'a Progress,
+}
+
+impl Control<'_> {
+    /// `kill -9` of `role`'s current process (the restart policy then applies); its pid.
+    pub fn kill(&mut self, role: ServiceRole) -> Option<u32> {
+        let s = self.pipe.service(role)?;
+        if s.poll_exit().is_some() {
+            return None;
+        }
+        s.signal(libc::SIGKILL);
+        Some(s.pid())
+    }
+
+    /// Whether `role` was restarted and has not reported ready yet (or is dead).
+    pub fn restarting(&mut self, role: ServiceRole) -> bool {
+        self.pipe.restarting[slot(role)].is_some()
+            || self
+                .pipe
+                .service(role)
+                .is_none_or(|s| s.poll_exit().is_some())
+    }
+
+    /// Restarts of `role` so far.
+    pub fn restarts(&self, role: ServiceRole) -> u32 {
+        self.pipe.restarts[slot(role)]
+    }
+
+    /// A progress note (a line above the progress bar, or a plain line).
+    pub fn note(&self, msg: &str) {
+        self.note.note(msg);
+    }
 }
 
 fn fail(code: u8) -> impl FnOnce(anyhow::Error) -> Failure {
@@ -161,7 +244,7 @@ pub fn resolve_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
 }
 
 /// The per-role process slots and what they accumulated over restarts.
-struct Pipeline {
+pub struct Pipeline {
     services: [Option<Service>; 3],
     /// Counters of earlier incarnations (restarts), per role.
     carried: [Option<ServiceStatus>; 3],
@@ -284,7 +367,7 @@ fn launch_for(
 }
 
 /// Progress output: an indicatif line on a terminal, plain lines every few seconds otherwise.
-struct Progress {
+pub struct Progress {
     bar: Option<indicatif::ProgressBar>,
     last_plain: Instant,
     quiet: bool,
@@ -314,11 +397,11 @@ impl Progress {
         }
     }
 
-    fn update(&mut self, monitor: &StatusMonitor, start: Instant) {
+    fn update(&mut self, monitor: &StatusMonitor, start: Instant, extra: &str) {
         if self.quiet {
             return;
         }
-        let line = progress_line(monitor, start);
+        let line = progress_line(monitor, start) + extra;
         match &self.bar {
             Some(bar) => bar.set_message(line),
             None => {
@@ -399,7 +482,9 @@ fn failure_code(status: std::process::ExitStatus) -> u8 {
     }
 }
 
-fn supervise(args: &RunArgs) -> Result<u8, Failure> {
+/// Runs the pipeline of `args` with `hooks`; the exit code (one of [`exit_code`]) and
+/// the summary.
+pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summary), Failure> {
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let cfg = resolve_config(args)
         .map_err(|e| e.context("bad config"))
@@ -459,6 +544,10 @@ fn supervise(args: &RunArgs) -> Result<u8, Failure> {
         &format!("microrobot-supervisor.{instance_name}"),
     )
     .map_err(fail(exit_code::FAILURE))?;
+    // The last measured state, for a restarted actuator to resume from.
+    let mut state_tap =
+        StateTap::open(monitor.node(), &instance_name).map_err(fail(exit_code::FAILURE))?;
+    hooks.before_start(&cfg).map_err(fail(exit_code::FAILURE))?;
 
     let started = Instant::now();
     let mut pipe = Pipeline {
@@ -557,7 +646,13 @@ fn supervise(args: &RunArgs) -> Result<u8, Failure> {
     let run_start = Instant::now();
     while outcome.is_none() {
         let _ = monitor.poll();
-        progress.update(&monitor, started);
+        state_tap.poll();
+        progress.update(&monitor, started, &hooks.progress());
+        hooks.poll(&mut Control {
+            pipe: &mut pipe,
+            monitor: &monitor,
+            note: &progress,
+        });
         if stop_flag.load(Ordering::SeqCst) {
             outcome = Some((Stop::Interrupted, exit_code::OK, String::new()));
             break;
@@ -633,12 +728,31 @@ fn supervise(args: &RunArgs) -> Result<u8, Failure> {
                 pipe.restarts[i],
                 cfg.supervisor.max_restarts
             ));
+            if role == ServiceRole::Actuator {
+                // Every state the dead actuator published, before its memory is cleaned.
+                state_tap.poll();
+            }
             // The dead process's iceoryx2 resources go before the new one opens its ports.
             instance::clean_leftovers(&instance_name);
-            let launch = match pipe.services[i].take() {
+            let mut launch = match pipe.services[i].take() {
                 Some(s) => s.launch,
                 None => continue,
             };
+            if role == ServiceRole::Actuator {
+                // The arm resumes where the dead actuator last measured it.
+                launch
+                    .env
+                    .retain(|(k, _)| k != microrobot_actuator::RESUME_ENV);
+                if let Some(kv) = state_tap.resume_env() {
+                    launch.env.push(kv);
+                }
+            }
+            hooks.restarting(
+                role,
+                (role == ServiceRole::Actuator)
+                    .then(|| state_tap.latest())
+                    .flatten(),
+            );
             monitor.reset(role, monotonic_ns());
             match Service::spawn(launch) {
                 Ok(s) => {
@@ -733,18 +847,10 @@ fn supervise(args: &RunArgs) -> Result<u8, Failure> {
         &exits,
     );
     // Our own node goes first, then whatever the services left (nothing, normally).
+    drop(state_tap);
     drop(monitor);
     instance::clean_leftovers(&instance_name);
-    println!("{}", summary.render());
-    if let Some(path) = &args.summary_json {
-        let text = serde_json::to_string_pretty(&summary)
-            .context("cannot serialise the summary")
-            .map_err(fail(exit_code::FAILURE))?;
-        std::fs::write(path, text + "\n")
-            .with_context(|| format!("cannot write {}", path.display()))
-            .map_err(fail(exit_code::FAILURE))?;
-    }
-    Ok(code)
+    Ok((code, summary))
 }
 
 /// Starts `microrobot record` for the instance and waits until all its subscribers are

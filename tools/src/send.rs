@@ -9,8 +9,8 @@ use anyhow::{Context as _, bail, ensure};
 use iceoryx2::prelude::*;
 use iceoryx2::service::messaging_pattern::MessagingPattern;
 use microrobot_messages::{
-    CommandKind, MAX_JOINTS, MotionCommand, ProfileKind, ServiceKind, ServiceRole, TargetSpace,
-    monotonic_ns, open_event, open_publish_subscribe, service_name,
+    CommandKind, MAX_JOINTS, MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole,
+    TargetSpace, monotonic_ns, open_event, open_publish_subscribe, service_name,
 };
 use microrobot_model::{JointKind, Robot};
 use microrobot_runtime::PipelineConfig;
@@ -150,8 +150,10 @@ pub fn build_command(args: &SendArgs, robot: Option<&Robot>) -> anyhow::Result<M
             );
             cmd.duration_s = duration;
             ensure!(
-                m.limit_scale.is_finite() && m.limit_scale > 0.0 && m.limit_scale <= 1.0,
-                "--limit-scale {}: must be in (0, 1]",
+                m.limit_scale.is_finite()
+                    && m.limit_scale >= microrobot_planner::MIN_LIMIT_SCALE
+                    && m.limit_scale <= 1.0,
+                "--limit-scale {}: must be in [0.001, 1]",
                 m.limit_scale
             );
             cmd.limit_scale = m.limit_scale;
@@ -308,8 +310,11 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
                 );
             }
             if st.commands_refused > base.commands_refused {
+                let why = RefusalReason::from_wire(st.last_command_refusal)
+                    .filter(|r| *r != RefusalReason::None)
+                    .map_or("see its log for why", RefusalReason::describe);
                 bail!(
-                    "the planner of `{instance}` refused the command (refused commands: {}; see its log for why)",
+                    "the planner of `{instance}` refused the command: {why} (refused commands: {}; its log has the details)",
                     st.commands_refused
                 );
             }

@@ -1,6 +1,7 @@
 //! `microrobot top`: a live table of a running pipeline's services from their status
 //! stream: cycles/s, latency p50/p99 (planner: wake-up lateness, dynamics: setpoint →
-//! torque, actuator: end-to-end), misses, lost, refused, stale, faults, lifecycle.
+//! torque, actuator: end-to-end), misses, lost, refused, stale, faults, lifecycle, and the
+//! planner's e-stop latency (receipt of the last e-stop → its first braking setpoint).
 
 use std::io::IsTerminal as _;
 use std::sync::Arc;
@@ -51,6 +52,10 @@ pub struct Row {
     pub refused_messages: u64,
     pub stale_cycles: u64,
     pub faults: u64,
+    /// Planner: e-stops executed, and receipt → first braking setpoint of the last one
+    /// (µs; null before the first e-stop and for the other services).
+    pub estops: u64,
+    pub estop_latency_us: Option<f64>,
     pub motion_time_s: f64,
     pub cpu_time_ms: u32,
     pub rss_kib: u64,
@@ -87,6 +92,8 @@ fn rows(monitor: &StatusMonitor) -> Vec<Row> {
             refused_messages: st.refused_messages,
             stale_cycles: st.stale_cycles,
             faults: st.faults,
+            estops: st.estops,
+            estop_latency_us: (st.estop_latency_ns > 0).then(|| us(st.estop_latency_ns)),
             motion_time_s: st.motion_time_s,
             cpu_time_ms: st.cpu_time_ms,
             rss_kib: st.rss_kib,
@@ -98,7 +105,7 @@ fn rows(monitor: &StatusMonitor) -> Vec<Row> {
 
 fn table(instance: &str, rows: &[Row]) -> String {
     let mut s = format!(
-        "microrobot top — instance `{instance}`\n{:<9} {:>7} {:<11} {:>9} {:>9} {:>9} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9}\n",
+        "microrobot top — instance `{instance}`\n{:<9} {:>7} {:<11} {:>9} {:>9} {:>9} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9} {:>11}\n",
         "service",
         "pid",
         "lifecycle",
@@ -110,7 +117,8 @@ fn table(instance: &str, rows: &[Row]) -> String {
         "refused",
         "stale",
         "faults",
-        "time s"
+        "time s",
+        "e-stop µs"
     );
     for r in rows {
         let rate = r
@@ -118,8 +126,12 @@ fn table(instance: &str, rows: &[Row]) -> String {
             .map(|v| format!("{v:.0}"))
             .unwrap_or_else(|| "-".into());
         let stale_mark = if r.age_s > 1.0 { " (silent)" } else { "" };
+        let estop = r
+            .estop_latency_us
+            .map(|v| format!("{v:.1}"))
+            .unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "{:<9} {:>7} {:<11} {:>9} {:>9.1} {:>9.1} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9.2}{stale_mark}\n",
+            "{:<9} {:>7} {:<11} {:>9} {:>9.1} {:>9.1} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9.2} {:>11}{stale_mark}\n",
             r.service,
             r.pid,
             r.lifecycle,
@@ -132,6 +144,7 @@ fn table(instance: &str, rows: &[Row]) -> String {
             r.stale_cycles,
             r.faults,
             r.motion_time_s,
+            estop,
         ));
     }
     s

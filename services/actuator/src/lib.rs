@@ -14,6 +14,7 @@
 //! sampled loop runs exactly the code the process runs.
 
 pub mod backend;
+pub mod resume;
 pub mod safety;
 pub mod sim;
 
@@ -33,6 +34,7 @@ use microrobot_runtime::watchdog::{Freshness, Watchdog};
 use microrobot_runtime::{BadConfig, PeriodicClock, Shutdown, StatusPort, open_node, waitset};
 
 pub use backend::{ActuatorBackend, BackendError, Measured};
+pub use resume::{RESUME_ENV, ResumeState};
 pub use safety::{Mode, Safety};
 pub use sim::SimArm;
 
@@ -75,6 +77,8 @@ pub struct ActuatorCore<B: ActuatorBackend> {
     pub tracking_error_max: [f64; MAX_JOINTS],
     /// Largest |τ applied| per joint.
     pub peak_torque: [f64; MAX_JOINTS],
+    /// Why the last refused torque command was refused.
+    pub last_refusal: Option<Refusal>,
 }
 
 impl<B: ActuatorBackend> ActuatorCore<B> {
@@ -111,6 +115,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             counters: Counters::default(),
             tracking_error_max: [0.0; MAX_JOINTS],
             peak_torque: [0.0; MAX_JOINTS],
+            last_refusal: None,
         })
     }
 
@@ -175,6 +180,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             }
             Err(e) => {
                 self.counters.refused += 1;
+                self.last_refusal = Some(e);
                 Err(e)
             }
         }
@@ -225,6 +231,25 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             }
         }
         did
+    }
+
+    /// A restart: continues from `tau`, the torque the predecessor applied last (blended,
+    /// never a step), and with `latch` comes up in the safe state, holding the measured
+    /// position, active, until a Reset (or `auto_resume` on fresh commands).
+    pub fn resume_after_restart(&mut self, tau: &JointVector, latch: bool) {
+        let mut t = *tau;
+        for i in self.dof..t.len() {
+            t[i] = 0.0;
+        }
+        self.safety.blend_from(&t);
+        if latch {
+            if self.backend.lifecycle() == LifecycleState::Inactive {
+                let _ = self.backend.activate();
+            }
+            self.counters.faults += 1;
+            self.safety.on_fault(&self.last_measured.q);
+            // `on_fault` blends from the last applied torque, which is `t`.
+        }
     }
 
     /// Whether the plant is stepped by the actuator's own timer (free-running, or the
@@ -281,6 +306,20 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                     self.tracking_error_max[i] = e;
                 }
             }
+        }
+        self.state_message(now_ns)
+    }
+
+    /// Shutdown: the backend goes Inactive (drives disabled, brakes on) if it was
+    /// active, and the returned last state message says so (lifecycle Inactive). Called
+    /// on every clean stop, including SIGTERM from a dead supervisor (PDEATHSIG).
+    pub fn shutdown(&mut self, now_ns: u64) -> JointState {
+        if self.backend.lifecycle() == LifecycleState::Active && self.backend.deactivate().is_err()
+        {
+            self.counters.faults += 1;
+        }
+        if let Ok(m) = self.backend.read() {
+            self.last_measured = m;
         }
         self.state_message(now_ns)
     }
@@ -387,10 +426,24 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("setpoint subscriber: {e:?}"))?;
     let mut status = StatusPort::open(&node, inst, ServiceRole::Actuator, cfg.status_period_ms)?;
 
-    // Resume where the arm is: a running planner's last setpoint (restart), else the config.
+    // Resume where the arm is: the predecessor's last published state (handed over by
+    // the supervisor after a restart), else a running planner's last setpoint, else the
+    // config.
+    let resume = ResumeState::from_env(&robot).map_err(BadConfig)?;
     let mut q0 = initial_q(&robot, cfg);
+    if let Some(r) = &resume {
+        q0 = r.q;
+        tracing::info!(
+            "actuator: restarted; resuming the arm at its last published state{}",
+            if cfg.watchdog.auto_resume {
+                ""
+            } else {
+                " in the safe state (send a reset to resume)"
+            }
+        );
+    }
     let probe_end = monotonic_ns() + RESUME_PROBE_MS * 1_000_000;
-    'probe: while monotonic_ns() < probe_end && !shutdown.is_requested() {
+    'probe: while resume.is_none() && monotonic_ns() < probe_end && !shutdown.is_requested() {
         while let Ok(Some(s)) = sp_sub.receive() {
             if s.dof as usize == dof && microrobot_messages::all_finite(&s.q, s.dof) {
                 q0 = JointVector::from_column_slice(&s.q);
@@ -402,8 +455,14 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     }
     drop(sp_sub);
 
-    let sim = SimArm::new(&robot, &cfg.actuator.sim, &q0);
+    let mut sim = SimArm::new(&robot, &cfg.actuator.sim, &q0);
+    if let Some(r) = &resume {
+        sim.set_state(&r.q, &r.qd);
+    }
     let mut core = ActuatorCore::new(sim, &robot, cfg).context("simulated arm")?;
+    if let Some(r) = &resume {
+        core.resume_after_restart(&r.tau, !cfg.watchdog.auto_resume);
+    }
     let mut e2e = LatencyHistogram::new();
 
     let PeriodicClock { timer, mut ticker } =
@@ -422,7 +481,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .attach_notification(shutdown)
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
 
-    let mut phased = false;
+    // Free-running with the planner on its own timer, the plant steps are phased half a
+    // period after the planner's ticks (below). When the planner ticks on states, this
+    // timer is the pipeline's master clock and is left where it is.
+    let mut phased = cfg.planner_ticks_on_states();
     let publish = |s: JointState| {
         let ok = state_pub.send_copy(s).is_ok();
         let _ = state_notifier.notify();
@@ -451,6 +513,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.latency = e2e.summary();
         st.tracking_error_max = core.tracking_error_max;
         st.peak_torque = core.peak_torque;
+        st.last_input_refusal = core
+            .last_refusal
+            .map_or(microrobot_messages::RefusalReason::None, Refusal::reason)
+            as u32;
     };
     fill(&mut st, &core, &e2e, 0);
     status.publish(monotonic_ns(), &mut st);
@@ -544,6 +610,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             status.publish(now, &mut st);
         }
     }
+    // Safe on the way out, however the stop was asked for (Ctrl-C, SIGTERM, the
+    // supervisor's death): brakes on, and the last state says so.
+    publish(core.shutdown(monotonic_ns()));
+    tracing::info!("actuator: stopped, backend inactive (drives disabled)");
     fill(&mut st, &core, &e2e, 0);
     status.publish_final(&mut st);
     Ok(())

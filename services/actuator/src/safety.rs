@@ -149,6 +149,14 @@ impl Safety {
         out
     }
 
+    /// Starts a blend from `tau` (a restarted actuator continues from the torque its
+    /// predecessor applied last instead of from zero).
+    pub fn blend_from(&mut self, tau: &JointVector) {
+        self.last_applied = *tau;
+        self.blend_from = *tau;
+        self.blend_step = 0;
+    }
+
     /// Records the torque actually applied (when the caller bypasses [`Safety::torque`]).
     pub fn set_last_applied(&mut self, tau: &JointVector) {
         self.last_applied = *tau;

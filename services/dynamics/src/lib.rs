@@ -66,6 +66,8 @@ pub struct DynamicsCore {
     pub counters: Counters,
     /// Largest |τ| commanded per joint (after clamping).
     pub peak_torque: [f64; MAX_JOINTS],
+    /// Why the last refused setpoint or state was refused.
+    pub last_refusal: Option<Refusal>,
 }
 
 impl DynamicsCore {
@@ -103,6 +105,7 @@ impl DynamicsCore {
             last_tick_value: None,
             counters: Counters::default(),
             peak_torque: [0.0; MAX_JOINTS],
+            last_refusal: None,
         }
     }
 
@@ -133,6 +136,7 @@ impl DynamicsCore {
             }
             Err(e) => {
                 self.counters.refused += 1;
+                self.last_refusal = Some(e);
                 Err(e)
             }
         }
@@ -169,6 +173,7 @@ impl DynamicsCore {
             .and_then(|()| self.sp_seq.accept(publisher, sp.header.seq));
         if let Err(e) = r {
             self.counters.refused += 1;
+            self.last_refusal = Some(e);
             return Err(e);
         }
         self.last_tick_value = Some(sp.header.tick);
@@ -192,8 +197,13 @@ impl DynamicsCore {
                 // previous torque); with delay compensation it is first predicted to the
                 // setpoint's time under the desired acceleration.
                 // Free-running, the state may be more than one tick old (after a missed
-                // tick the planner catches up): predict over the actual tick distance.
-                let ticks = sp.header.tick.saturating_sub(s.header.tick).clamp(1, 10);
+                // tick the planner catches up), or as new as the setpoint or newer (the
+                // actuator kept stepping while the planner was held up, e.g. by a host
+                // stall, and the planner now catches up): predict over the actual, signed,
+                // tick distance, so the error is taken at the setpoint's time (a state 20
+                // ticks ahead predicted one tick further gave a 20-tick "error" and a
+                // torque step; found by `microrobot soak`).
+                let ticks = (sp.header.tick as i64 - s.header.tick as i64).clamp(-10, 10);
                 let h = if self.predict {
                     self.period_s * ticks as f64
                 } else {
@@ -228,6 +238,7 @@ impl DynamicsCore {
             } else if !tau[i].is_finite() {
                 // A singular model at this state: refuse rather than forward garbage.
                 self.counters.refused += 1;
+                self.last_refusal = Some(Refusal::NonFinite);
                 return Err(Refusal::NonFinite);
             }
         }
@@ -327,6 +338,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.latency = lat.summary();
         st.peak_torque = core.peak_torque;
         st.motion_time_s = core.last_tick().unwrap_or(0) as f64 / cfg.rate_hz;
+        st.last_input_refusal = core
+            .last_refusal
+            .map_or(microrobot_messages::RefusalReason::None, Refusal::reason)
+            as u32;
     };
     fill(&mut st, &core, &lat, 0);
     status.publish(monotonic_ns(), &mut st);

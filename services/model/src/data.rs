@@ -11,7 +11,13 @@ use nalgebra::Vector3;
 /// it can serve any robot of up to [`MAX_JOINTS`] joints.
 #[derive(Clone, Debug)]
 pub struct ModelData {
-    /// `cos` of each joint's DH theta (with `q` for revolute joints).
+    /// Each joint's DH theta (with `q` for revolute joints) that `cos` and `sin`
+    /// belong to (0 beyond `dof`): a call with the same angles as the last one
+    /// (kinematics, then dynamics at the same `q`) reuses them.
+    pub(crate) theta: [f64; MAX_JOINTS],
+    /// The joint count `theta` was evaluated for (0: nothing cached yet).
+    pub(crate) theta_dof: usize,
+    /// `cos` of each joint's DH theta.
     pub(crate) cos: [f64; MAX_JOINTS],
     /// `sin` of each joint's DH theta.
     pub(crate) sin: [f64; MAX_JOINTS],
@@ -24,15 +30,16 @@ pub struct ModelData {
     /// RNEA: body forces and moments (frame `i`, about its origin).
     pub(crate) force: [Vector3<f64>; MAX_JOINTS],
     pub(crate) moment: [Vector3<f64>; MAX_JOINTS],
-    /// Last mass matrix and its Cholesky factor (lower triangle).
+    /// Last mass matrix.
     pub(crate) mass: MassMatrix,
-    pub(crate) chol: MassMatrix,
 }
 
 impl ModelData {
     /// Scratch for `robot` (any robot of up to [`MAX_JOINTS`] joints fits).
     pub fn new(_robot: &Robot) -> ModelData {
         ModelData {
+            theta: [0.0; MAX_JOINTS],
+            theta_dof: 0,
             cos: [1.0; MAX_JOINTS],
             sin: [0.0; MAX_JOINTS],
             d: [0.0; MAX_JOINTS],
@@ -41,7 +48,6 @@ impl ModelData {
             force: [Vector3::zeros(); MAX_JOINTS],
             moment: [Vector3::zeros(); MAX_JOINTS],
             mass: MassMatrix::zeros(),
-            chol: MassMatrix::zeros(),
         }
     }
 

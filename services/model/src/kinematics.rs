@@ -3,15 +3,21 @@
 //! smallest singular value, rank.
 
 use crate::data::ModelData;
-use crate::math::{Pose, sin_cos_pair};
+use crate::isa::{Isa, for_dof, multiversion};
+use crate::math::Pose;
 use crate::robot::{Robot, Twist};
 use crate::{Jacobian, JointVector, MAX_JOINTS};
 use nalgebra::{Isometry3, Matrix3, SMatrix, Vector3};
 
-/// Evaluates `cos θ_i`, `sin θ_i` and `d_i` of every joint for `q` into `data`.
-#[inline]
-pub(crate) fn update_joint_values(robot: &Robot, data: &mut ModelData, q: &JointVector) {
-    let n = robot.dof;
+/// Evaluates `cos θ_i`, `sin θ_i` and `d_i` of the `n = dof` joints for `q` into `data`.
+#[inline(always)]
+pub(crate) fn update_joint_values<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    n: usize,
+) {
+    let n = n.min(MAX_JOINTS);
     let mut theta = [0.0; MAX_JOINTS];
     for i in 0..n {
         let jc = &robot.consts[i];
@@ -23,17 +29,18 @@ pub(crate) fn update_joint_values(robot: &Robot, data: &mut ModelData, q: &Joint
             data.d[i] = jc.d0 + q[i];
         }
     }
-    let mut i = 0;
-    while i < n {
-        // Two angles per SIMD call; a lone last joint pairs with a dummy 0.
-        let [a, b] = sin_cos_pair(theta[i], theta[(i + 1).min(MAX_JOINTS - 1)]);
-        data.sin[i] = a.0;
-        data.cos[i] = a.1;
-        if i + 1 < n {
-            data.sin[i + 1] = b.0;
-            data.cos[i + 1] = b.1;
-        }
-        i += 2;
+    // The same angles as last time (bit for bit, same joint count) have their
+    // sine and cosine already.
+    let same = theta
+        .iter()
+        .zip(&data.theta)
+        .fold(n == data.theta_dof, |same, (a, b)| {
+            same & (a.to_bits() == b.to_bits())
+        });
+    if !same {
+        data.theta = theta;
+        data.theta_dof = n;
+        S::sin_cos_joints(n, &theta, &mut data.sin, &mut data.cos);
     }
 }
 
@@ -42,14 +49,14 @@ pub(crate) fn update_joint_values(robot: &Robot, data: &mut ModelData, q: &Joint
 /// The running frame is kept in locals (axes `x`, `y`, `z` and origin `o`) and
 /// only written to `data`: reading the previous frame back from memory would
 /// stall on store-to-load forwarding every joint.
-#[inline]
-pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData) {
+#[inline(always)]
+pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData, n: usize) {
     let base = &data.frames[0];
     let mut x: Vector3<f64> = base.rotation.column(0).into_owned();
     let mut y: Vector3<f64> = base.rotation.column(1).into_owned();
     let mut z: Vector3<f64> = base.rotation.column(2).into_owned();
     let mut o = base.translation;
-    for i in 0..robot.dof {
+    for i in 0..n.min(MAX_JOINTS) {
         let jc = &robot.consts[i];
         let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
         // R_prev · Rz(θ): rotate the first two axes about z.
@@ -63,7 +70,13 @@ pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData) {
             Twist::General => (yr * jc.ca + z * jc.sa, z * jc.ca - yr * jc.sa),
         };
         // origin: o_prev + R_prev (a cθ, a sθ, d) = o_prev + a·x_new + d·z_prev
-        o += xr * jc.a + z * d;
+        // (most DH rows have a = 0 or d = 0)
+        if jc.a != 0.0 {
+            o += xr * jc.a;
+        }
+        if d != 0.0 {
+            o += z * d;
+        }
         x = xr;
         y = y2;
         z = z2;
@@ -83,35 +96,78 @@ pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData) {
     };
 }
 
-/// Every frame and the tool frame for `q`, left in `data`.
-#[inline]
-pub(crate) fn update_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector) {
-    update_joint_values(robot, data, q);
-    update_frames(robot, data);
+#[inline(always)]
+pub(crate) fn update_kinematics_with<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) {
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        update_frames(robot, data, n)
+    })
 }
 
-/// Tool pose in the base frame for joint positions `q` (seed eq. 1 chained, then
-/// the tool transform). Every DH frame is left in `data` ([`ModelData::frame`]);
-/// [`ModelData::tool_frame`] gives the same pose as a rotation matrix.
-pub fn forward_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Isometry3<f64> {
-    update_kinematics(robot, data, q);
+multiversion! {
+    /// Every frame and the tool frame for `q`, left in `data`.
+    pub(crate) fn update_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector)
+        => update_kinematics_with;
+}
+
+#[inline(always)]
+pub(crate) fn forward_kinematics_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+) -> Isometry3<f64> {
+    update_kinematics_with::<S>(robot, data, q);
     data.tool.to_isometry()
 }
 
-/// Geometric Jacobian of the tool frame origin in the base frame (rows
-/// `vx vy vz wx wy wz`): column `j` is `[z_{j-1} × (p − o_{j-1}); z_{j-1}]` for a
-/// revolute joint and `[z_{j-1}; 0]` for a prismatic one. Runs the forward
-/// kinematics too (frames left in `data`).
-pub fn jacobian(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Jacobian {
-    update_kinematics(robot, data, q);
-    jacobian_from_frames(robot, data)
+#[inline(always)]
+pub(crate) fn jacobian_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+) -> Jacobian {
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        update_frames(robot, data, n);
+        jacobian_of_frames(robot, data, n)
+    })
+}
+
+#[inline(always)]
+pub(crate) fn tool_pose_with<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose {
+    update_kinematics_with::<S>(robot, data, q);
+    data.tool
+}
+
+multiversion! {
+    /// Tool pose in the base frame for joint positions `q` (seed eq. 1 chained, then
+    /// the tool transform). Every DH frame is left in `data` ([`ModelData::frame`]);
+    /// [`ModelData::tool_frame`] gives the same pose as a rotation matrix.
+    pub fn forward_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Isometry3<f64>
+        => forward_kinematics_with;
+}
+
+multiversion! {
+    /// Geometric Jacobian of the tool frame origin in the base frame (rows
+    /// `vx vy vz wx wy wz`): column `j` is `[z_{j-1} × (p − o_{j-1}); z_{j-1}]` for a
+    /// revolute joint and `[z_{j-1}; 0]` for a prismatic one. Runs the forward
+    /// kinematics too (frames left in `data`).
+    pub fn jacobian(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Jacobian
+        => jacobian_with;
 }
 
 /// The Jacobian from the frames already in `data`.
+#[inline(always)]
 pub(crate) fn jacobian_from_frames(robot: &Robot, data: &ModelData) -> Jacobian {
+    jacobian_of_frames(robot, data, robot.dof)
+}
+
+/// [`jacobian_from_frames`] for the first `n = dof` joints.
+#[inline(always)]
+fn jacobian_of_frames(robot: &Robot, data: &ModelData, n: usize) -> Jacobian {
     let mut jac = Jacobian::zeros();
     let p = data.tool.translation;
-    for j in 0..robot.dof {
+    for j in 0..n.min(MAX_JOINTS) {
         let f = &data.frames[j];
         let z: Vector3<f64> = f.rotation.column(2).into_owned();
         if robot.consts[j].revolute {
@@ -235,9 +291,9 @@ pub fn rank(jac: &Jacobian, dof: usize, rows: TaskRows) -> usize {
     dexterity(jac, dof, rows).rank
 }
 
-/// Pose of every DH frame and the tool; convenience for callers that want the
-/// homogeneous matrices (e.g. the eval interface).
-pub fn tool_pose(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose {
-    update_kinematics(robot, data, q);
-    data.tool
+multiversion! {
+    /// Pose of every DH frame and the tool; convenience for callers that want the
+    /// homogeneous matrices (e.g. the eval interface).
+    pub fn tool_pose(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose
+        => tool_pose_with;
 }

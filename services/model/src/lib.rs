@@ -40,6 +40,7 @@
 mod data;
 pub mod dynamics;
 pub mod ik;
+mod isa;
 pub mod kinematics;
 pub mod lagrange_euler;
 mod math;

@@ -160,15 +160,11 @@ impl Joint {
     }
 }
 
+/// `viscous · qd + coulomb · sign(qd)` with `sign(0) = 0`; the sign comes from
+/// two comparisons, not branches (a joint's direction is unpredictable).
 #[inline(always)]
 pub(crate) fn friction(viscous: f64, coulomb: f64, qd: f64) -> f64 {
-    let sign = if qd > 0.0 {
-        1.0
-    } else if qd < 0.0 {
-        -1.0
-    } else {
-        0.0
-    };
+    let sign = f64::from(u8::from(qd > 0.0)) - f64::from(u8::from(qd < 0.0));
     viscous * qd + coulomb * sign
 }
 
@@ -238,6 +234,37 @@ impl Twist {
     }
 }
 
+/// Which components of a constant vector can be non-zero: a cross product with
+/// a vector along one axis needs two multiplications instead of six. DH frame
+/// offsets and link centres of mass very often lie along one axis.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) enum Sparsity {
+    /// The zero vector.
+    #[default]
+    Zero,
+    /// Only `x` non-zero.
+    X,
+    /// Only `y` non-zero.
+    Y,
+    /// Only `z` non-zero.
+    Z,
+    /// Any vector.
+    General,
+}
+
+impl Sparsity {
+    /// The class of `v` (exact zeros only).
+    pub(crate) fn of(v: &Vector3<f64>) -> Sparsity {
+        match (v.x != 0.0, v.y != 0.0, v.z != 0.0) {
+            (false, false, false) => Sparsity::Zero,
+            (true, false, false) => Sparsity::X,
+            (false, true, false) => Sparsity::Y,
+            (false, false, true) => Sparsity::Z,
+            _ => Sparsity::General,
+        }
+    }
+}
+
 /// Per-joint constants in the form the algorithms read (SI).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct JointConst {
@@ -252,6 +279,11 @@ pub(crate) struct JointConst {
     /// Whether frame `i`'s origin can differ from frame `i-1`'s (false for a
     /// revolute joint with `a = d = 0`, whose offset terms are skipped).
     pub offset: bool,
+    /// Revolute joints: origin `O_i` seen from `O_{i-1}` in frame `i`,
+    /// `p* = (a, d sα, d cα)`, and its sparsity (prismatic joints: `General`,
+    /// `p*` varies with `d`).
+    pub pstar: Vector3<f64>,
+    pub pstar_kind: Sparsity,
     pub rotor: f64,
     pub viscous: f64,
     pub coulomb: f64,
@@ -269,8 +301,8 @@ pub(crate) struct Body {
     pub h: Vector3<f64>,
     /// Inertia about the frame origin.
     pub inertia_origin: Matrix3<f64>,
-    /// Whether the centre of mass is off the frame origin (`h != 0`).
-    pub has_h: bool,
+    /// Sparsity of `h` (`Zero`: the centre of mass is at the frame origin).
+    pub h_kind: Sparsity,
     /// Diagonal of `inertia_origin` when it has no products of inertia.
     pub diagonal_inertia: Option<Vector3<f64>>,
 }
@@ -292,7 +324,7 @@ impl Body {
             inertia_com: l.inertia,
             h: c * l.mass,
             inertia_origin,
-            has_h: c * l.mass != Vector3::zeros(),
+            h_kind: Sparsity::of(&(c * l.mass)),
             diagonal_inertia: (inertia_origin
                 == Matrix3::from_diagonal(&inertia_origin.diagonal()))
             .then(|| inertia_origin.diagonal()),
@@ -335,15 +367,24 @@ impl Robot {
         let mut bodies = [Body::default(); MAX_JOINTS];
         for (i, j) in joints.iter().enumerate() {
             let twist = Twist::of(j.dh.alpha);
+            let (ca, sa) = (twist.cos(j.dh.alpha), twist.sin(j.dh.alpha));
+            let revolute = j.kind == JointKind::Revolute;
+            let pstar = Vector3::new(j.dh.a, j.dh.d * sa, j.dh.d * ca);
             consts[i] = JointConst {
-                revolute: j.kind == JointKind::Revolute,
+                revolute,
                 theta0: j.dh.theta,
                 d0: j.dh.d,
                 a: j.dh.a,
-                ca: twist.cos(j.dh.alpha),
-                sa: twist.sin(j.dh.alpha),
+                ca,
+                sa,
                 twist,
                 offset: !(j.kind == JointKind::Revolute && j.dh.a == 0.0 && j.dh.d == 0.0),
+                pstar,
+                pstar_kind: if revolute {
+                    Sparsity::of(&pstar)
+                } else {
+                    Sparsity::General
+                },
                 rotor: j.rotor_inertia,
                 viscous: j.viscous_friction,
                 coulomb: j.coulomb_friction,

@@ -11,8 +11,10 @@
 //!   the arm. A new motion is planned from the current setpoint state (q, q̇, q̈), so the
 //!   stream never jumps. A Move, Stop or EStop abandons the rest of the program.
 //! * Safety: while the actuator reports its safe state, the setpoint follows the
-//!   measured state (flag HOLD_FOR_SAFE_STATE); after the Reset the arm is brought to
-//!   rest from there with a jerk-limited stop. Stale measured state (free-running,
+//!   measured state (flag HOLD_FOR_SAFE_STATE); after the Reset, as soon as the
+//!   actuator reports that it has left its safe state (it takes the same Reset; with
+//!   `auto_resume`, whenever it does), the arm is brought to rest from the measured
+//!   state with a jerk-limited stop. Stale measured state (free-running,
 //!   older than `stale_ms`) triggers the same stop.
 //! * Time: a setpoint's logical time is its tick number × period: one period per
 //!   published setpoint, so a late or skipped tick delays the motion rather than making
@@ -29,14 +31,15 @@ pub mod teleop;
 use iceoryx2::prelude::*;
 use microrobot_messages::{
     CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState, MAX_JOINTS,
-    MasterPose, MotionCommand, ProfileKind, ServiceKind, ServiceRole, ServiceStatus, TargetSpace,
-    monotonic_ns, open_event, open_publish_subscribe, setpoint_flags, state_flags,
+    MasterPose, MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole,
+    ServiceStatus, TargetSpace, monotonic_ns, open_event, open_publish_subscribe, setpoint_flags,
+    state_flags,
 };
 use microrobot_model::ik::{IkOptions, IkTarget};
 use microrobot_model::{ModelData, Robot};
 use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::stats::LatencyHistogram;
-use microrobot_runtime::validate::{SeqTracker, check_fresh, check_state};
+use microrobot_runtime::validate::{Refusal, SeqTracker, check_fresh, check_state};
 use microrobot_runtime::{BadConfig, PeriodicClock, Shutdown, StatusPort, open_node, waitset};
 use microrobot_trajectory::{
     Generator, JointState, JointVector, KinematicLimits, MotionRequest, Profile, Sample, Status,
@@ -69,7 +72,7 @@ pub enum CommandError {
         "duration_s = {0} is not valid for this profile (> 0 s and <= 3600 s; soft: 0 = time-optimal)"
     )]
     BadDuration(f64),
-    #[error("limit_scale = {0} must be in (0, 1] (0: the config's default)")]
+    #[error("limit_scale = {0} must be in [0.001, 1] (0: the config's default)")]
     BadLimitScale(f64),
     #[error("the command is stale or from the future (stamp {age_ms:.1} ms old)")]
     Stale { age_ms: f64 },
@@ -90,6 +93,36 @@ pub enum CommandError {
     #[error("teleop is entered at rest only; stop the running motion first")]
     TeleopNotAtRest,
 }
+
+impl CommandError {
+    /// The wire code reported in `ServiceStatus::last_command_refusal`.
+    pub fn reason(&self) -> RefusalReason {
+        match self {
+            Self::UnknownKind(_) => RefusalReason::UnknownKind,
+            Self::UnknownProfile(_) => RefusalReason::UnknownProfile,
+            Self::UnknownSpace(_) => RefusalReason::UnknownSpace,
+            Self::WrongDof { .. } => RefusalReason::WrongDof,
+            Self::NonFinite { .. } => RefusalReason::NonFinite,
+            Self::OutOfLimits { .. } => RefusalReason::OutOfLimits,
+            Self::BadDuration(_) => RefusalReason::BadDuration,
+            Self::BadLimitScale(_) => RefusalReason::BadLimitScale,
+            Self::Stale { .. } => RefusalReason::Stale,
+            Self::EStopActive => RefusalReason::EStopActive,
+            Self::SafeStateActive => RefusalReason::SafeStateActive,
+            Self::Unreachable(_) => RefusalReason::Unreachable,
+            Self::BadQuaternion => RefusalReason::BadQuaternion,
+            Self::Plan(_) => RefusalReason::CannotPlan,
+            Self::NotStarted => RefusalReason::NotStarted,
+            Self::TeleopUnavailable(_) => RefusalReason::TeleopUnavailable,
+            Self::TeleopNotAtRest => RefusalReason::TeleopNotAtRest,
+        }
+    }
+}
+
+/// The smallest `MotionCommand::limit_scale` accepted (0 aside, which means the
+/// config's): slower than 0.1 % of the robot's limits is no motion anyone asks for, and
+/// denormal limits break the planners' root finding (a corpus input found a panic).
+pub const MIN_LIMIT_SCALE: f64 = 1e-3;
 
 /// What the planner is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -145,9 +178,17 @@ pub struct PlannerCore {
     pub counters: Counters,
     /// Last command error, for logging by the caller.
     pub last_error: Option<CommandError>,
+    /// Why the last refused measured state was refused.
+    pub last_state_refusal: Option<Refusal>,
     estop_at_ns: Option<u64>,
+    /// A Reset arrived in [`Mode::SafeHold`]: resume when the actuator leaves its safe state.
+    resume_pending: bool,
+    /// `watchdog.auto_resume`: resume without a Reset when the actuator does.
+    auto_resume: bool,
     /// Time from the last e-stop command's receipt to its first braking setpoint (ns).
     pub last_estop_latency_ns: Option<u64>,
+    /// The largest such time so far (ns).
+    pub max_estop_latency_ns: u64,
     teleop: teleop::TeleopMode,
     teleop_at_start: bool,
     /// The measured state was stale at the last check (teleop holds meanwhile).
@@ -192,8 +233,12 @@ impl PlannerCore {
             last_state: None,
             counters: Counters::default(),
             last_error: None,
+            last_state_refusal: None,
             estop_at_ns: None,
+            resume_pending: false,
+            auto_resume: cfg.watchdog.auto_resume,
             last_estop_latency_ns: None,
+            max_estop_latency_ns: 0,
             teleop: teleop::TeleopMode::new(robot, cfg, &scaled(robot, cfg.planner.limit_scale)),
             teleop_at_start: cfg.teleop.enabled,
             state_stale: false,
@@ -253,10 +298,11 @@ impl PlannerCore {
     /// Validates a measured state; the first one sets the start position (at rest).
     /// Returns whether it was accepted.
     pub fn accept_state(&mut self, s: &BusState, publisher: u128) -> bool {
-        if check_state(s, self.dof).is_err()
-            || self.state_seq.accept(publisher, s.header.seq).is_err()
+        if let Err(e) =
+            check_state(s, self.dof).and_then(|()| self.state_seq.accept(publisher, s.header.seq))
         {
             self.counters.states_refused += 1;
+            self.last_state_refusal = Some(e);
             return false;
         }
         self.last_state = Some(*s);
@@ -375,8 +421,9 @@ impl PlannerCore {
                         self.current.jerk = JointVector::zeros();
                     }
                     Mode::SafeHold => {
-                        // Bring the followed measured state to rest, jerk-limited.
-                        self.brake(false)?;
+                        // Resume once the actuator has left its safe state (it takes
+                        // the same reset): see `check_state`.
+                        self.resume_pending = true;
                     }
                     _ => {}
                 }
@@ -441,7 +488,7 @@ impl PlannerCore {
                 field: "limit_scale",
             });
         }
-        if !(0.0..=1.0).contains(&c.limit_scale) {
+        if c.limit_scale != 0.0 && !(MIN_LIMIT_SCALE..=1.0).contains(&c.limit_scale) {
             return Err(CommandError::BadLimitScale(c.limit_scale));
         }
         let d = c.duration_s;
@@ -549,8 +596,22 @@ impl PlannerCore {
         let Some(s) = self.last_state else {
             return;
         };
-        if s.flags & state_flags::SAFE_STATE != 0 || s.lifecycle == LifecycleState::Fault as u32 {
+        let safe =
+            s.flags & state_flags::SAFE_STATE != 0 || s.lifecycle == LifecycleState::Fault as u32;
+        if !safe && self.mode == Mode::SafeHold && (self.resume_pending || self.auto_resume) {
+            // The actuator follows commands again: bring the followed measured state to
+            // rest, jerk-limited (bumpless from where the arm is).
+            self.resume_pending = false;
+            if self.brake(false).is_ok() {
+                tracing::info!(
+                    "planner: the actuator left its safe state; resuming from the measured state"
+                );
+            }
+            return;
+        }
+        if safe {
             if self.mode != Mode::SafeHold {
+                self.resume_pending = false;
                 tracing::warn!(
                     "planner: the actuator reports its safe state; following the measured state"
                 );
@@ -642,9 +703,14 @@ impl PlannerCore {
         if self.program_done {
             flags |= setpoint_flags::PROGRAM_DONE;
         }
-        if let Some(t) = self.estop_at_ns.take() {
+        // An e-stop in the actuator's safe state brakes nothing (the arm already holds):
+        // only a braking setpoint is timed.
+        if let Some(t) = self.estop_at_ns.take()
+            && self.mode == Mode::EStop
+        {
             let l = now_ns.saturating_sub(t);
             self.last_estop_latency_ns = Some(l);
+            self.max_estop_latency_ns = self.max_estop_latency_ns.max(l);
             tracing::info!(
                 "planner: e-stop: first braking setpoint {:.1} µs after the command",
                 l as f64 / 1e3
@@ -703,8 +769,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .history_request(1)
         .create()
         .map_err(|e| err("state subscriber")(&e))?;
-    // Only lockstep wakes on states; free-running reads the newest state each tick.
-    let st_listener = if cfg.lockstep {
+    // Ticking on states wakes on them; the timer clock reads the newest state each tick.
+    let on_states = cfg.planner_ticks_on_states();
+    let st_listener = if on_states {
         Some(
             open_event(&node, inst, ServiceKind::State)?
                 .listener_builder()
@@ -769,8 +836,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let mut lateness = LatencyHistogram::new();
     let PeriodicClock { timer, mut ticker } =
         PeriodicClock::start(cfg.period_ns(), cfg.realtime.overrun)?;
-    if cfg.lockstep {
-        // Lockstep ticks on states; the timer only paces status and watchdog checks.
+    if on_states {
+        // Ticks come from states; the timer only paces status and watchdog checks.
         let p = status.period_ns();
         timer.arm_absolute(monotonic_ns() + p, p)?;
     }
@@ -797,7 +864,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let fill = |st: &mut ServiceStatus,
                 core: &PlannerCore,
                 lat: &LatencyHistogram,
-                ticker: &microrobot_runtime::Ticker| {
+                ticker: &microrobot_runtime::Ticker,
+                state_clock_misses: u64| {
         st.ready = 1;
         st.lifecycle = if core.mode() == Mode::EStop || core.mode() == Mode::SafeHold {
             LifecycleState::Fault as u32
@@ -807,6 +875,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.cycles = core.counters.ticks;
         st.deadline_misses = if cfg.lockstep {
             0
+        } else if on_states {
+            state_clock_misses
         } else {
             ticker.deadline_misses
         };
@@ -819,6 +889,16 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.refused_messages = core.counters.states_refused + core.counters.commands_refused;
         st.stale_cycles = core.counters.stale_cycles;
         st.faults = core.counters.estops;
+        st.estops = core.counters.estops;
+        st.estop_latency_ns = core.last_estop_latency_ns.unwrap_or(0);
+        st.estop_latency_max_ns = core.max_estop_latency_ns;
+        st.last_command_refusal =
+            core.last_error
+                .as_ref()
+                .map_or(RefusalReason::None, CommandError::reason) as u32;
+        st.last_input_refusal = core
+            .last_state_refusal
+            .map_or(RefusalReason::None, Refusal::reason) as u32;
         st.commands_accepted = core.counters.commands_accepted;
         st.commands_refused = core.counters.commands_refused;
         st.motion_time_s = core.motion_time_s();
@@ -826,11 +906,13 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.latency = lat.summary();
     };
 
+    // Ticks on states that woke more than one period after the state was stamped.
+    let mut state_clock_misses = 0u64;
     if cfg.lockstep {
         // The first setpoint answers the initial state.
         publish(core.tick(monotonic_ns()));
     }
-    fill(&mut st, &core, &lateness, &ticker);
+    fill(&mut st, &core, &lateness, &ticker, state_clock_misses);
     status.publish(monotonic_ns(), &mut st);
 
     while !shutdown.is_requested() {
@@ -871,8 +953,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             drop(s);
             core.on_master(&m, monotonic_ns());
         }
-        // States: in lockstep each one is a tick; otherwise keep the newest.
-        if fired[0] || !cfg.lockstep {
+        // States: ticking on states, each one is a tick; otherwise keep the newest.
+        if fired[0] || !on_states {
             if let Some(l) = &st_listener {
                 let _ = l.try_wait(|_| {});
             }
@@ -880,8 +962,15 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
-                if core.accept_state(&msg, publisher) && cfg.lockstep {
+                if core.accept_state(&msg, publisher) && on_states {
                     let now = monotonic_ns();
+                    if !cfg.lockstep {
+                        // The state's stamp is the master clock's tick: lateness is the
+                        // wake-up after it, as for the timer clock.
+                        let late = now.saturating_sub(msg.header.stamp_ns);
+                        lateness.record(late);
+                        state_clock_misses += u64::from(late > cfg.period_ns());
+                    }
                     core.check_state(now);
                     publish(core.tick(now));
                 }
@@ -889,8 +978,12 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         }
         if fired[2] {
             ticker.on_expirations(timer.read_expirations());
-            if cfg.lockstep {
+            if on_states {
                 while ticker.next_tick().is_some() {}
+                // A silent actuator stops the ticks: the stale check still runs here.
+                if !cfg.lockstep {
+                    core.check_state(monotonic_ns());
+                }
             } else {
                 while let Some(t) = ticker.next_tick() {
                     let now = monotonic_ns();
@@ -902,11 +995,11 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         }
         let now = monotonic_ns();
         if status.due(now) {
-            fill(&mut st, &core, &lateness, &ticker);
+            fill(&mut st, &core, &lateness, &ticker, state_clock_misses);
             status.publish(now, &mut st);
         }
     }
-    fill(&mut st, &core, &lateness, &ticker);
+    fill(&mut st, &core, &lateness, &ticker, state_clock_misses);
     status.publish_final(&mut st);
     let t = core.teleop();
     if t.counters.samples > 0 || t.counters.refused > 0 {

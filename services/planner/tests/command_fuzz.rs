@@ -39,6 +39,23 @@ fn any_f64() -> impl Strategy<Value = f64> {
     ]
 }
 
+/// The property: decoded without a panic; a refused command leaves the setpoint stream
+/// exactly where it was; every setpoint stays finite.
+fn check(c: &MotionCommand) -> Result<(), TestCaseError> {
+    let mut p = planner();
+    let before = p.tick(1);
+    let accepted = p.on_command(c, 1_000_000_000_000).is_ok();
+    let after = p.tick(1);
+    if !accepted {
+        prop_assert_eq!(before.q, after.q);
+        prop_assert_eq!(before.qd, after.qd);
+    }
+    for i in 0..6 {
+        prop_assert!(after.q[i].is_finite() && after.qd[i].is_finite() && after.qdd[i].is_finite());
+    }
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(512))]
 
@@ -48,17 +65,55 @@ proptest! {
         target in proptest::array::uniform8(any_f64()), duration_s in any_f64(), limit_scale in any_f64(),
         stamp_ns in any::<u64>(),
     ) {
-        let mut p = planner();
-        let before = p.tick(1);
-        let c = MotionCommand { seq: 1, stamp_ns, kind, profile, space, dof, target, duration_s, limit_scale };
-        let accepted = p.on_command(&c, 1_000_000_000_000).is_ok();
-        let after = p.tick(1);
-        if !accepted {
-            prop_assert_eq!(before.q, after.q);
-            prop_assert_eq!(before.qd, after.qd);
-        }
-        for i in 0..6 {
-            prop_assert!(after.q[i].is_finite() && after.qd[i].is_finite() && after.qdd[i].is_finite());
-        }
+        check(&MotionCommand { seq: 1, stamp_ns, kind, profile, space, dof, target, duration_s, limit_scale })?;
     }
+}
+
+/// A float of the corpus: decimal, `nan`, `inf`, `-inf`, or `0x` + raw bits.
+fn corpus_f64(s: &str) -> f64 {
+    match s.strip_prefix("0x") {
+        Some(hex) => f64::from_bits(u64::from_str_radix(hex, 16).expect("hex bits")),
+        None => s.parse().unwrap_or_else(|_| panic!("corpus float `{s}`")),
+    }
+}
+
+/// Replays `tests/corpus/commands.txt` (interesting commands, one per line) through the
+/// same property on every run.
+#[test]
+fn the_command_corpus_is_decoded_safely() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/corpus/commands.txt");
+    let text = std::fs::read_to_string(&path).expect("corpus");
+    let mut n = 0;
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let f: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!(f.len(), 15, "line {}: 15 fields", i + 1);
+        let int = |s: &str| {
+            s.parse::<u64>()
+                .unwrap_or_else(|_| panic!("line {}: `{s}`", i + 1))
+        };
+        let mut target = [0.0; 8];
+        for (t, s) in target.iter_mut().zip(&f[4..12]) {
+            *t = corpus_f64(s);
+        }
+        let c = MotionCommand {
+            seq: 1,
+            kind: int(f[0]) as u32,
+            profile: int(f[1]) as u32,
+            space: int(f[2]) as u32,
+            dof: int(f[3]) as u32,
+            target,
+            duration_s: corpus_f64(f[12]),
+            limit_scale: corpus_f64(f[13]),
+            stamp_ns: int(f[14]),
+        };
+        if let Err(e) = check(&c) {
+            panic!("corpus line {}: {e}: {c:?}", i + 1);
+        }
+        n += 1;
+    }
+    assert!(n >= 30, "{n} corpus commands");
 }

@@ -180,3 +180,42 @@ fn stop_brings_the_arm_to_rest() {
     assert!(last.qd.iter().all(|v| *v == 0.0));
     assert!(p.program_done());
 }
+
+/// The reset handshake: a Reset in the actuator's safe state resumes the planner only
+/// once the actuator reports that it has left that state (the same Reset reaches both,
+/// in either order), so the planner never stays behind following a resumed arm.
+#[test]
+fn a_reset_in_the_safe_state_resumes_when_the_actuator_does() {
+    let mut p = setup();
+    let state = |seq: u64, safe: bool| JointState {
+        dof: 6,
+        flags: if safe {
+            microrobot_messages::state_flags::SAFE_STATE
+        } else {
+            0
+        },
+        header: microrobot_messages::Header {
+            seq,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    assert!(p.accept_state(&state(2, true), 1));
+    p.check_state(0);
+    assert_eq!(p.mode(), Mode::SafeHold);
+    assert!(p.on_command(&cmd(CommandKind::Reset), 0).is_ok());
+    // The actuator has not processed the reset yet: still following it.
+    assert!(p.accept_state(&state(3, true), 1));
+    p.check_state(0);
+    p.tick(0);
+    assert_eq!(p.mode(), Mode::SafeHold);
+    assert_eq!(
+        p.on_command(&mv(T, ProfileKind::Soft, 0.0), 0),
+        Err(CommandError::SafeStateActive)
+    );
+    // Now it has: the planner resumes (a jerk-limited stop from the measured state).
+    assert!(p.accept_state(&state(4, false), 1));
+    p.check_state(0);
+    assert_ne!(p.mode(), Mode::SafeHold);
+    assert!(p.on_command(&mv(T, ProfileKind::Soft, 0.0), 0).is_ok());
+}

@@ -54,6 +54,16 @@ pub enum OverrunPolicy {
     CatchUp,
 }
 
+/// What the planner ticks on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlannerClock {
+    /// Its own absolute-deadline timer at `rate_hz`: the planner is the pipeline's clock.
+    Timer,
+    /// Each measured-state message of the actuator: the drive's bus cycle is the master
+    /// clock (as with an EtherCAT distributed clock). Lockstep always ticks this way.
+    ActuatorState,
+}
+
 /// Numerical integrator of the simulated arm.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Integrator {
@@ -106,6 +116,8 @@ pub struct PlannerConfig {
     pub estop_limit_scale: f64,
     /// A Move command with a stamp older than this is refused as stale (ms).
     pub command_max_age_ms: f64,
+    /// What the planner ticks on (free-running; lockstep always ticks on states).
+    pub clock: PlannerClock,
 }
 
 /// `[dynamics]`.
@@ -244,6 +256,7 @@ impl Default for PipelineConfig {
                 limit_scale: 1.0,
                 estop_limit_scale: 1.0,
                 command_max_age_ms: 1000.0,
+                clock: PlannerClock::Timer,
             },
             dynamics: DynamicsConfig {
                 feedback: true,
@@ -328,6 +341,12 @@ impl PipelineConfig {
         (1e9 / self.rate_hz).round() as u64
     }
 
+    /// Whether the planner ticks once per measured-state message (lockstep, or
+    /// `planner.clock = "actuator_state"`) instead of on its own timer.
+    pub fn planner_ticks_on_states(&self) -> bool {
+        self.lockstep || self.planner.clock == PlannerClock::ActuatorState
+    }
+
     /// Serialises the (validated) config back to TOML with absolute paths, so the text
     /// is self-contained: `from_toml_str(to_toml_string())` gives the same config.
     pub fn to_toml_string(&self) -> String {
@@ -364,6 +383,14 @@ impl PipelineConfig {
         let _ = writeln!(s, "limit_scale = {}", f(p.limit_scale));
         let _ = writeln!(s, "estop_limit_scale = {}", f(p.estop_limit_scale));
         let _ = writeln!(s, "command_max_age_ms = {}", f(p.command_max_age_ms));
+        let _ = writeln!(
+            s,
+            "clock = {}",
+            quote(match p.clock {
+                PlannerClock::Timer => "timer",
+                PlannerClock::ActuatorState => "actuator_state",
+            })
+        );
         let d = &self.dynamics;
         let _ = writeln!(s, "\n[dynamics]");
         let _ = writeln!(s, "feedback = {}", d.feedback);
@@ -739,6 +766,7 @@ impl Reader<'_> {
                 "limit_scale",
                 "estop_limit_scale",
                 "command_max_age_ms",
+                "clock",
             ],
         )?;
         let dp = &d.planner;
@@ -767,6 +795,15 @@ impl Reader<'_> {
                 0.0,
                 3_600_000.0,
                 true,
+            )?,
+            clock: self.choice(
+                &t,
+                "clock",
+                dp.clock,
+                &[
+                    ("timer", PlannerClock::Timer),
+                    ("actuator_state", PlannerClock::ActuatorState),
+                ],
             )?,
         };
 

@@ -2,7 +2,9 @@
 //! increasing sequence numbers per publisher, fresh timestamps, joint limits. A refused
 //! message is counted and dropped; the stage holds its last good output.
 
-use microrobot_messages::{JointSetpoint, JointState, MAX_JOINTS, TorqueCommand, all_finite};
+use microrobot_messages::{
+    JointSetpoint, JointState, MAX_JOINTS, RefusalReason, TorqueCommand, all_finite,
+};
 
 /// Why an input message was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -17,6 +19,19 @@ pub enum Refusal {
     Stale,
     /// Outside the joint limits.
     OutOfLimits,
+}
+
+impl Refusal {
+    /// The wire code reported in `ServiceStatus::last_input_refusal`.
+    pub fn reason(self) -> RefusalReason {
+        match self {
+            Self::NonFinite => RefusalReason::NonFinite,
+            Self::WrongDof => RefusalReason::WrongDof,
+            Self::OutOfOrder => RefusalReason::OutOfOrder,
+            Self::Stale => RefusalReason::Stale,
+            Self::OutOfLimits => RefusalReason::OutOfLimits,
+        }
+    }
 }
 
 /// Per-stream sequence tracking: refuses duplicates and reordering, counts gaps as lost

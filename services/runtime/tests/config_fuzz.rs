@@ -61,3 +61,22 @@ proptest! {
         check(&lines.join("\n"));
     }
 }
+
+/// Replays every file of `tests/corpus/config/` (interesting configs, one per file)
+/// through the same property on every run.
+#[test]
+fn the_config_corpus_never_panics() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus/config");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).expect("corpus dir") {
+        let path = entry.expect("entry").path();
+        let bytes = std::fs::read(&path).expect("corpus file");
+        // Not every corpus file is valid UTF-8 on purpose: those must be refused too.
+        match String::from_utf8(bytes) {
+            Ok(text) => check(&text),
+            Err(_) => assert!(PipelineConfig::load(&path).is_err(), "{}", path.display()),
+        }
+        n += 1;
+    }
+    assert!(n >= 20, "{n} corpus files");
+}

@@ -39,6 +39,19 @@ fn benches(c: &mut Criterion) {
             tr.sample(black_box(t))
         })
     });
+    // The same into one kept Sample (no zeroing, no copy of the returned value).
+    let mut out = microrobot_trajectory::Sample::default();
+    t = 0.0;
+    c.bench_function("trajectory/sample_into_6", |b| {
+        b.iter(|| {
+            t += 0.001;
+            if t > 5.0 {
+                t = 0.0;
+            }
+            tr.sample_into(black_box(t), &mut out);
+            black_box(&mut out);
+        })
+    });
     // The planner's per-cycle call: 1 kHz steps with the piece search cached.
     let mut g = Generator::new(tr);
     c.bench_function("trajectory/generator_update_6", |b| {

@@ -85,6 +85,15 @@ fn main() {
         }
         black_box(tr.sample(black_box(t)));
     });
+    let mut kept = microrobot_trajectory::Sample::default();
+    let sample_into_ns = mean_ns(1_000_000, || {
+        t += 0.001;
+        if t > 5.0 {
+            t = 0.0;
+        }
+        tr.sample_into(black_box(t), &mut kept);
+        black_box(&mut kept);
+    });
     let mut g = Generator::new(tr);
     let gen_ns = mean_ns(1_000_000, || {
         if g.time() > 5.0 {
@@ -96,6 +105,10 @@ fn main() {
     println!("  trajectory/plan_rest_to_rest_6  {:8.1} ns", r2r_ns);
     println!("  trajectory/plan_from_state_6    {:8.1} ns", fs_ns);
     println!("  trajectory/sample_6             {:8.1} ns", sample_ns);
+    println!(
+        "  trajectory/sample_into_6        {:8.1} ns",
+        sample_into_ns
+    );
     println!("  trajectory/generator_update_6   {:8.1} ns", gen_ns);
 
     let many = common::random_from_state(n_problems);

@@ -8,7 +8,8 @@
 //! ```
 //!
 //! Workloads: `rest_to_rest` (Table 4), `from_state` (the bench's 256 random
-//! problems, cycled), `sample` (Table 4 sampled every 1 ms over 5 s). The second
+//! problems, cycled), `sample` (Table 4 sampled every 1 ms over 5 s), `sample_into`
+//! (the same into one kept `Sample`). The second
 //! argument is the number of calls; Ir / calls is the cost per call.
 
 #[path = "../benches/common/mod.rs"]
@@ -44,6 +45,20 @@ fn run_sample(tr: &Trajectory, n: usize) {
     }
 }
 
+#[inline(never)]
+fn run_sample_into(tr: &Trajectory, n: usize) {
+    let mut t = 0.0;
+    let mut out = microrobot_trajectory::Sample::default();
+    for _ in 0..n {
+        t += 0.001;
+        if t > 5.0 {
+            t = 0.0;
+        }
+        tr.sample_into(black_box(t), &mut out);
+        black_box(&mut out);
+    }
+}
+
 fn main() {
     let mut args = std::env::args().skip(1);
     let which = args.next().unwrap_or_else(|| "from_state".into());
@@ -60,6 +75,12 @@ fn main() {
             Ok(tr) => run_sample(&tr, n),
             Err(e) => eprintln!("Table 4 does not plan: {e}"),
         },
-        other => eprintln!("unknown workload {other}: rest_to_rest | from_state | sample"),
+        "sample_into" => match Trajectory::plan(&r2r) {
+            Ok(tr) => run_sample_into(&tr, n),
+            Err(e) => eprintln!("Table 4 does not plan: {e}"),
+        },
+        other => {
+            eprintln!("unknown workload {other}: rest_to_rest | from_state | sample | sample_into")
+        }
     }
 }

@@ -2,10 +2,11 @@
 //!
 //! Each joint's time-optimal duration is computed; the slowest sets T (or the
 //! requested minimum duration if longer). A joint started in motion may be unable to
-//! finish at some durations just above its own minimum (its stretch family starts at
-//! a *floor*, see [`crate::soft::stretch`]); T is then raised to the smallest duration
-//! every joint reaches, as Ruckig's time synchronisation does with blocked intervals.
-//! Every other joint is then stretched to T within its limits.
+//! finish at some durations above its own minimum (blocked intervals of its stretch
+//! family, computed exactly by [`crate::soft::stretch::Stretch::next_reachable`]); T
+//! is then raised to the smallest duration every joint reaches, as Ruckig's time
+//! synchronisation does with its blocked intervals. Every other joint is stretched to
+//! T within its limits.
 
 use crate::piecewise::{Kin, Phases, Piecewise};
 use crate::soft::stretch::Stretch;
@@ -154,14 +155,21 @@ pub(crate) fn plan_soft(
         };
         t_sync = t_sync.max(work[i].t_opt);
     }
-    // Stretch the others; raise T past blocked intervals until every joint reaches it.
+    // Stretch the others. A joint that cannot take T (a blocked interval) names the
+    // next duration it reaches; T moves to the largest such and the round repeats, so
+    // the final T is the smallest duration ≥ the slowest minimum that every joint
+    // reaches. Each raise lands on an interval end of some joint (at most 3 each), so
+    // this settles within a few rounds; the round limit is a guard against round-off
+    // ping-pong, after which T moves past every joint's "stop, then move" floor.
     let mut stretches: [Option<Stretch>; MAX_JOINTS] = [None; MAX_JOINTS];
     let mut stretched = [false; MAX_JOINTS];
     let eps = |t: f64| 1e-12 * t.max(1.0);
-    for _ in 0..=dof + 1 {
+    for round in 0..4 * MAX_JOINTS + 2 {
         let mut raise = t_sync;
+        let mut blocked = false;
         for i in 0..dof {
             let w = work[i];
+            stretched[i] = false;
             if t_sync - w.t_opt <= eps(t_sync) {
                 continue;
             }
@@ -183,13 +191,37 @@ pub(crate) fn plan_soft(
                     plans[i] = ph;
                     stretched[i] = true;
                 }
-                None => raise = raise.max(w.t_brake + st.guaranteed()),
+                None => {
+                    blocked = true;
+                    let next = w.t_brake + st.next_reachable(t_sync - w.t_brake);
+                    let next = if next > t_sync {
+                        next
+                    } else {
+                        w.t_brake + st.guaranteed()
+                    };
+                    raise = raise.max(next);
+                }
             }
         }
-        if raise <= t_sync {
+        if !blocked {
             break;
         }
         t_sync = raise;
+        if round + 1 == 4 * MAX_JOINTS {
+            // Guard: past every joint's floor, "stop, then move" reaches T.
+            for i in 0..dof {
+                let w = work[i];
+                let st = Stretch::prepared(
+                    w.after.v,
+                    w.after.a,
+                    target_q[i] - w.after.p,
+                    &limits1(limits, i),
+                    w.anchor,
+                    w.pb,
+                );
+                t_sync = t_sync.max(w.t_brake + st.guaranteed());
+            }
+        }
     }
     // The joints that set T move time-optimally: their phases are written now.
     for i in 0..dof {

@@ -239,12 +239,35 @@ impl Trajectory {
 
     /// Position, velocity, acceleration and jerk of every joint at time `t` (s).
     /// Before 0: the start state; from the end on: the final state with zero jerk.
-    /// Allocation-free, division-free: per joint a branch-free binary search over its
-    /// piece ends and one cubic Horner evaluation.
+    /// Allocation-free, division-free: per joint a short scan over its piece ends
+    /// and one cubic Horner evaluation.
     #[inline]
     pub fn sample(&self, t: f64) -> Sample {
-        // Written in place (the 256-byte Sample is returned without extra copies).
         let mut out = Sample::default();
+        self.write_sample(t, &mut out);
+        out
+    }
+
+    /// [`Trajectory::sample`] written into `out` (every lane; those past `dof` are
+    /// zeroed): no 256-byte zeroing and copy of a returned value, for loops that keep
+    /// one `Sample` per cycle.
+    #[inline]
+    pub fn sample_into(&self, t: f64, out: &mut Sample) {
+        // Lanes past dof are usually zero already (same trajectory shape every
+        // cycle): check instead of storing (and no memset call for a few lanes).
+        for k in self.dof.min(MAX_JOINTS)..MAX_JOINTS {
+            for v in [&mut out.q, &mut out.qd, &mut out.qdd, &mut out.jerk] {
+                if v[k] != 0.0 {
+                    v[k] = 0.0;
+                }
+            }
+        }
+        self.write_sample(t, out);
+    }
+
+    /// Writes lanes 0..dof of `out` (q, qd, qdd, jerk at `t`).
+    #[inline(always)]
+    fn write_sample(&self, t: f64, out: &mut Sample) {
         let n = self.dof.min(MAX_JOINTS);
         let joints = &self.joints[..n];
         let (q, qd) = (out.q.as_mut_slice(), out.qd.as_mut_slice());
@@ -256,6 +279,7 @@ impl Trajectory {
                 q[i] = f.p;
                 qd[i] = f.v;
                 qdd[i] = f.a;
+                jerk[i] = 0.0;
             }
         } else if self.quintic {
             for (i, pw) in joints.iter().enumerate() {
@@ -266,7 +290,6 @@ impl Trajectory {
                 [q[i], qd[i], qdd[i], jerk[i]] = pw.eval_cubic(t);
             }
         }
-        out
     }
 
     /// [`Trajectory::sample`]. The per-joint piece hints are no longer needed (the

@@ -291,3 +291,33 @@ fn synchronised_motion_with_a_braking_joint_stays_within_limits_after_the_brake(
     let late = tr.sample(tr.duration() * 0.99);
     assert!(late.qd[0].abs() > 0.0 && late.qd[1].abs() > 0.0);
 }
+
+/// `sample_into` writes exactly what `sample` returns, lanes past `dof` included (zero),
+/// into a `Sample` that held anything before: soft (moving start), quintic, and after
+/// the end.
+#[test]
+fn sample_into_equals_sample_whatever_the_buffer_held() {
+    let lim = limits(&[1.0, 2.0, 0.5], &[1.0, 3.0, 2.0], &[2.0, 5.0, 1.0], 10.0);
+    let soft = soft_request(
+        &[0.0, 1.0, -1.0],
+        &[0.3, -0.2, 0.0],
+        &[0.1, 0.0, -0.4],
+        &[1.0, -1.0, 0.5],
+        lim,
+    );
+    let mut quintic = soft;
+    quintic.profile = Profile::Quintic { duration: 3.0 };
+    let mut out = microrobot_trajectory::Sample::default();
+    for req in [soft, quintic] {
+        let tr = Trajectory::plan(&req).expect("plans");
+        for k in -2..=62 {
+            let t = tr.duration() * k as f64 / 60.0;
+            for v in [&mut out.q, &mut out.qd, &mut out.qdd, &mut out.jerk] {
+                v.fill(7.0);
+            }
+            tr.sample_into(t, &mut out);
+            assert_eq!(out, tr.sample(t), "t = {t}");
+            assert!(out.q.as_slice()[3..].iter().all(|&x| x == 0.0));
+        }
+    }
+}

@@ -7,6 +7,7 @@
 mod common;
 use common::*;
 use microrobot_trajectory::soft::stretch::Stretch;
+use microrobot_trajectory::soft::velocity::{ramp, ramp_from_rest};
 use microrobot_trajectory::soft::{Kin, Limits1, from_state, rest_to_rest, stop_velocity};
 use microrobot_trajectory::{JointState, MotionRequest, Profile, Trajectory, stop_trajectory};
 use proptest::prelude::*;
@@ -82,6 +83,61 @@ prop_compose! {
             lo + (fv * 0.5 + 0.5) * (hi - lo) * 0.999
         };
         ([v, a, j], [q0, v0, a0], q1)
+    }
+}
+
+/// Independent oracle for the durations one joint can be stretched to: a dense scan
+/// of the stretch family (velocity change to a peak velocity vp, cruise, ramp down to
+/// rest) over vp, each run of consecutive members as the interval [min T, max T] of
+/// their durations (inner approximations of the true images), plus "stop, then a
+/// rest-to-rest move" from its floor on. Returns (intervals, floor).
+fn reachable_by_scan(v0: f64, a0: f64, d: f64, lim: &Limits1) -> (Vec<(f64, f64)>, f64) {
+    let pb = from_state::brake_point(v0, a0, lim);
+    let (v, a, d, pb) = if d >= pb {
+        (v0, a0, d, pb)
+    } else {
+        (-v0, -a0, -d, -pb)
+    };
+    let stop = ramp(v, a, 0.0, lim).duration();
+    let floor = stop + rest_to_rest::time_optimal_duration(d - pb, lim);
+    let n = 20_000;
+    let mut runs: Vec<(f64, f64)> = Vec::new();
+    let mut in_run = false;
+    for k in 1..=n {
+        let vp = lim.v * k as f64 / n as f64;
+        let r1 = ramp(v, a, vp, lim);
+        let end = r1.integrate(Kin { p: 0.0, v, a });
+        let (t1, t2, d2) = ramp_from_rest(vp, lim);
+        let dist = end.p + d2;
+        if dist > d {
+            in_run = false;
+            continue;
+        }
+        let t = r1.duration() + 2.0 * t1 + t2 + (d - dist) / vp;
+        match runs.last_mut() {
+            Some(run) if in_run => *run = (run.0.min(t), run.1.max(t)),
+            _ => runs.push((t, t)),
+        }
+        in_run = true;
+    }
+    (runs, floor)
+}
+
+prop_compose! {
+    /// A joint decelerating towards a target just past its brake point (where the
+    /// stretch family has blocked intervals), and a requested duration above its minimum.
+    fn decelerating_problem()(v in 0.2f64..5.0, a in 0.2f64..5.0, j in 0.2f64..20.0,
+                              fa in 0.05f64..1.0, fv in 0.0f64..1.0, u in 0.0f64..1.0,
+                              x in 0.0f64..1.0, neg in prop::bool::ANY)
+                              -> (Limits1, f64, f64, f64, f64) {
+        let lim = Limits1 { v, a, j };
+        let a0 = -fa * a.min(0.99 * (4.0 * j * v).sqrt());
+        // Stop velocity v0 − a0²/(2j) within ±vmax, v0 ≥ 0.
+        let lo = (-v + a0 * a0 / (2.0 * j)).max(0.0);
+        let v0 = lo + fv * (v - lo) * 0.999;
+        let d = from_state::brake_point(v0, a0, &lim) + 2.0 * u * u * u;
+        let sg = if neg { -1.0 } else { 1.0 };
+        (lim, sg * v0, sg * a0, sg * d, x)
     }
 }
 
@@ -178,6 +234,34 @@ proptest! {
         let near = tr.sample(tr.duration() * (1.0 - 1e-12));
         prop_assert!((near.q[0] - q1).abs() < 1e-8 && near.qd[0].abs() < 1e-8);
         check_walk(&tr, 1, &[l], true, 0.0)?;
+    }
+
+    /// Synchronisation takes the smallest duration the joint reaches: asked for T
+    /// (above its minimum), the plan takes T itself when the family (or "stop, then
+    /// move") has a member of that duration, and otherwise the end of the blocked
+    /// interval — no duration between T and the planned one is reachable (scan oracle).
+    #[test]
+    fn soft_synchronised_duration_is_the_smallest_reachable((lim1, v0, a0, d, x) in decelerating_problem()) {
+        let lim = limits(&[lim1.v], &[lim1.a], &[lim1.j], 1e3);
+        let mut req = soft_request(&[0.0], &[v0], &[a0], &[d], lim);
+        let t_opt = Trajectory::plan(&req).expect("plans").duration();
+        let t_req = t_opt * (1.0 + 1e-6 + x);
+        req.profile = Profile::Soft { min_duration: Some(t_req) };
+        let tr = Trajectory::plan(&req).expect("plans");
+        let t = tr.duration();
+        prop_assert!(t >= t_req * (1.0 - 1e-12));
+        let near = tr.sample(t * (1.0 - 1e-12));
+        prop_assert!((near.q[0] - d).abs() < 1e-8 && near.qd[0].abs() < 1e-8);
+        tr.check_limits(&lim, true).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let (runs, floor) = reachable_by_scan(v0, a0, d, &lim1);
+        let reachable = |s: f64| s >= floor || runs.iter().any(|&(lo, hi)| s >= lo && s <= hi);
+        if t > t_req * (1.0 + 1e-9) {
+            for k in 0..=20 {
+                let s = t_req + (t - t_req) * k as f64 / 20.0;
+                let s = s.min(t * (1.0 - 1e-6));
+                prop_assert!(!reachable(s), "asked {t_req}, planned {t}, yet {s} is reachable (runs {runs:?}, floor {floor})");
+            }
+        }
     }
 
     #[test]
@@ -333,4 +417,46 @@ fn braked_motion_to_a_target_short_of_the_vmax_level_off_lands_on_it() {
     .expect("continuous, |v| within the brake's peak, a and jerk within the limits");
     let later = tr.sample(0.6 * tr.duration());
     assert!(later.qd[0].abs() <= lim.velocity[0] * (1.0 + 1e-9));
+}
+
+/// A joint decelerating towards a target just past its brake point, asked for a
+/// duration just above its minimum (found by `soft_synchronised_duration_is_the_smallest_reachable`).
+/// The requested duration is blocked; until 2026-12-01 synchronisation raised it to the
+/// "stop, then move" floor, although the stretch family reaches a shorter one (the end
+/// of the blocked interval, where its cruise velocity is small).
+#[test]
+fn blocked_duration_is_raised_to_the_end_of_the_blocked_interval_not_the_floor() {
+    let lim1 = Limits1 {
+        v: 1.607882619036064,
+        a: 1.872704276179884,
+        j: 0.2,
+    };
+    let (v0, a0, d) = (0.9419946165717734, -0.05614064044731314, 1.908092858450313);
+    let lim = limits(&[lim1.v], &[lim1.a], &[lim1.j], 1e3);
+    let mut req = soft_request(&[0.0], &[v0], &[a0], &[d], lim);
+    let t_opt = Trajectory::plan(&req).expect("plans").duration();
+    let t_req = t_opt * (1.0 + 1e-6);
+    req.profile = Profile::Soft {
+        min_duration: Some(t_req),
+    };
+    let t = Trajectory::plan(&req).expect("plans").duration();
+    let (runs, floor) = reachable_by_scan(v0, a0, d, &lim1);
+    assert!(
+        t > t_req * (1.0 + 1e-9),
+        "{t_req} s is blocked, yet planned {t}"
+    );
+    assert!(
+        t < floor * (1.0 - 1e-6),
+        "planned {t}, the floor is {floor}"
+    );
+    // The smallest duration ≥ t_req the scan finds lies within its grid's resolution.
+    let best = runs
+        .iter()
+        .filter(|r| r.1 >= t_req)
+        .map(|r| r.0.max(t_req))
+        .fold(floor, f64::min);
+    assert!(
+        t <= best * (1.0 + 1e-12) && t >= best * (1.0 - 1e-4),
+        "planned {t}, scan {best}"
+    );
 }

@@ -139,6 +139,11 @@ pub fn status_json(m: &ServiceStatus) -> Value {
         "latency": latency_json(&m.latency),
         "tracking_error_max": m.tracking_error_max.to_vec(),
         "peak_torque": m.peak_torque.to_vec(),
+        "estops": m.estops,
+        "estop_latency_ns": m.estop_latency_ns,
+        "estop_latency_max_ns": m.estop_latency_max_ns,
+        "last_command_refusal": m.last_command_refusal,
+        "last_input_refusal": m.last_input_refusal,
     })
 }
 

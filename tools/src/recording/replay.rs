@@ -228,9 +228,15 @@ pub fn replay_closed_loop(args: &ReplayArgs) -> Result<ClosedLoopReport> {
             .map(|m| (m.header.seq, torque_content(m)))
             .collect(),
     );
+    // The actuator's shutdown state (its backend deactivated at the stop, after the
+    // loop) has no counterpart in the replayed loop.
+    let shutdown = |m: &&JointState| {
+        m.header.seq > 1 && m.lifecycle == microrobot_messages::LifecycleState::Inactive as u32
+    };
     let mut st = by_seq(
         states
             .iter()
+            .filter(|m| !shutdown(m))
             .map(|m| (m.header.seq, state_content(m)))
             .collect(),
     );

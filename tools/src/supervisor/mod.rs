@@ -4,4 +4,5 @@
 pub mod instance;
 pub mod monitor;
 pub mod process;
+pub mod state_tap;
 pub mod summary;

@@ -5,17 +5,18 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use microrobot_messages::{LatencySummary, LifecycleState, MAX_JOINTS, ServiceRole, ServiceStatus};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::monitor::slot;
 
 /// Latency percentiles in µs.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
 pub struct Percentiles {
     pub count: u64,
     pub p50: f64,
     pub p99: f64,
     pub p999: f64,
+    pub p9999: f64,
     pub max: f64,
 }
 
@@ -27,13 +28,14 @@ impl From<&LatencySummary> for Percentiles {
             p50: us(l.p50_ns),
             p99: us(l.p99_ns),
             p999: us(l.p999_ns),
+            p9999: us(l.p9999_ns),
             max: us(l.max_ns),
         }
     }
 }
 
 /// One service over the whole run.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ServiceSummary {
     pub cycles: u64,
     pub deadline_misses: u64,
@@ -57,7 +59,7 @@ pub struct ServiceSummary {
 }
 
 /// Everything `microrobot run` reports at the end.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
     pub instance: String,
     pub exit_ok: bool,
@@ -87,6 +89,12 @@ pub struct Summary {
     pub tracking_error_max_rad: Vec<f64>,
     /// max |τ| commanded per joint (N·m or N).
     pub peak_torque_nm: Vec<f64>,
+    /// E-stop commands the planner executed.
+    pub estops: u64,
+    /// Receipt of the last e-stop command → its first braking setpoint (µs; null: none).
+    pub estop_latency_us: Option<f64>,
+    /// The largest such time of the run (µs; null: no e-stop).
+    pub estop_latency_max_us: Option<f64>,
     pub services: BTreeMap<String, ServiceSummary>,
     pub run_dir: String,
 }
@@ -111,6 +119,11 @@ pub fn fold(acc: &mut ServiceStatus, s: &ServiceStatus) {
     acc.program_done = s.program_done;
     acc.cpu_time_ms = acc.cpu_time_ms.saturating_add(s.cpu_time_ms);
     acc.rss_kib = acc.rss_kib.max(s.rss_kib);
+    acc.estops += s.estops;
+    if s.estop_latency_ns > 0 {
+        acc.estop_latency_ns = s.estop_latency_ns;
+    }
+    acc.estop_latency_max_ns = acc.estop_latency_max_ns.max(s.estop_latency_max_ns);
     let (a, b) = (&mut acc.latency, &s.latency);
     a.count += b.count;
     a.p50_ns = a.p50_ns.max(b.p50_ns);
@@ -229,6 +242,11 @@ impl Summary {
             planner_lateness_us: Percentiles::from(&planner.latency),
             tracking_error_max_rad: tracking_src.tracking_error_max[..dof].to_vec(),
             peak_torque_nm: dynamics.peak_torque[..dof].to_vec(),
+            estops: planner.estops,
+            estop_latency_us: (planner.estop_latency_ns > 0)
+                .then(|| planner.estop_latency_ns as f64 / 1e3),
+            estop_latency_max_us: (planner.estop_latency_max_ns > 0)
+                .then(|| planner.estop_latency_max_ns as f64 / 1e3),
             services,
             run_dir: facts.run_dir,
         }
@@ -312,6 +330,13 @@ impl Summary {
             "  peak torque:        [{}] N·m",
             fmt(&self.peak_torque_nm, 1.0, 3)
         );
+        if let (Some(last), Some(max)) = (self.estop_latency_us, self.estop_latency_max_us) {
+            let _ = writeln!(
+                s,
+                "  e-stops {}: command → first braking setpoint {:.1} µs (last), {:.1} µs (max)",
+                self.estops, last, max
+            );
+        }
         let _ = writeln!(
             s,
             "  deadline misses {}, lost messages {}, logs in {}",

@@ -7,10 +7,11 @@
 //! The DH twist's signed permutations make most rotations free.
 
 use crate::data::ModelData;
+use crate::isa::{Isa, for_dof, multiversion};
 use crate::kinematics::update_joint_values;
 use crate::math::joint_rot;
 use crate::robot::{JointConst, Robot, Twist};
-use crate::{JointVector, MassMatrix};
+use crate::{JointVector, MAX_JOINTS, MassMatrix};
 use nalgebra::Vector3;
 
 /// Symmetric 3×3 matrix by its six distinct entries.
@@ -105,32 +106,136 @@ impl Sym3 {
     }
 }
 
-/// Joint-space mass matrix `M(q)` (the seed's `D_ij`, eq. 20) with rotor inertia
-/// on the diagonal; symmetric, zero outside the `dof` block. Allocation-free.
-pub fn mass_matrix(robot: &Robot, data: &mut ModelData, q: &JointVector) -> MassMatrix {
-    update_joint_values(robot, data, q);
-    mass_matrix_from_joint_values(robot, data);
+#[inline(always)]
+pub(crate) fn mass_matrix_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+) -> MassMatrix {
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        mass_matrix_from_joint_values(robot, data, n)
+    });
     data.mass
 }
 
+multiversion! {
+    /// Joint-space mass matrix `M(q)` (the seed's `D_ij`, eq. 20) with rotor inertia
+    /// on the diagonal; symmetric, zero outside the `dof` block. Allocation-free.
+    pub fn mass_matrix(robot: &Robot, data: &mut ModelData, q: &JointVector) -> MassMatrix
+        => mass_matrix_with;
+}
+
+/// `p × f` for `p = (a cos θ, a sin θ, d)`, the origin of frame `k + 1` in
+/// frame `k`, skipping the zero `a` or `d` of most DH rows.
+#[inline(always)]
+fn offset_cross(a: f64, c: f64, s: f64, d: f64, f: &Vector3<f64>) -> Vector3<f64> {
+    let mut m = if d != 0.0 {
+        Vector3::new(-(d * f.y), d * f.x, 0.0)
+    } else {
+        Vector3::zeros()
+    };
+    if a != 0.0 {
+        let (px, py) = (a * c, a * s);
+        m += Vector3::new(py * f.z, -(px * f.z), px * f.y - py * f.x);
+    }
+    m
+}
+
+/// One step of carrying the pending mass-matrix columns down the chain: from
+/// frame `joint + 1` to frame `joint` (rotation `Rz(θ) Rx(α)`, origin shift
+/// `p = (a cos θ, a sin θ, d)`), reading off `M[joint][j]`.
+struct CarryColumns {
+    joint: usize,
+    dof: usize,
+    a: f64,
+    c: f64,
+    s: f64,
+    d: f64,
+    offset: bool,
+    revolute: bool,
+}
+
+impl CarryColumns {
+    /// `rot_x` applies `Rx(α)`; the rest of the rotation is the 2-D `Rz(θ)`.
+    #[inline(always)]
+    fn run(
+        &self,
+        mass: &mut MassMatrix,
+        col_force: &mut [Vector3<f64>; MAX_JOINTS],
+        col_moment: &mut [Vector3<f64>; MAX_JOINTS],
+        rot_x: impl Fn(&Vector3<f64>) -> Vector3<f64>,
+    ) {
+        let (c, s, i) = (self.c, self.s, self.joint);
+        let rot = |v: &Vector3<f64>| {
+            let u = rot_x(v);
+            Vector3::new(c * u.x - s * u.y, s * u.x + c * u.y, u.z)
+        };
+        for j in (i + 1)..self.dof {
+            let force = rot(&col_force[j]);
+            let mut moment = rot(&col_moment[j]);
+            if self.offset {
+                moment += offset_cross(self.a, c, s, self.d, &force);
+            }
+            let mij = if self.revolute { moment.z } else { force.z };
+            mass[(i, j)] = mij;
+            mass[(j, i)] = mij;
+            col_force[j] = force;
+            col_moment[j] = moment;
+        }
+    }
+}
+
 /// CRBA on the joint values already in `data`; result in `data.mass`.
-#[inline]
-pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData) {
-    let n = robot.dof;
+///
+/// The columns `M_{·j}` of the joints beyond the current one are carried down
+/// the chain together, one joint at a time: they are independent, so the CPU
+/// overlaps them instead of waiting on one column's chain of rotations.
+#[inline(always)]
+pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData, n: usize) {
+    let n = n.min(MAX_JOINTS);
     let mass = &mut data.mass;
-    mass.fill(0.0);
+    *mass = MassMatrix::zeros();
     // Composite of bodies i..n about the origin of the frame it is expressed in.
     let mut m = 0.0;
     let mut h = Vector3::zeros();
     let mut inertia = Sym3::default();
+    // Spatial force (moment about the frame origin, force) of column j's unit
+    // motion, for the columns j > i, in frame i + 1.
+    let mut col_moment = [Vector3::zeros(); MAX_JOINTS];
+    let mut col_force = [Vector3::zeros(); MAX_JOINTS];
     for i in (0..n).rev() {
+        let jc = &robot.consts[i];
+        let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
+        // Carry the pending columns from frame i + 1 to frame i, with the twist's
+        // rotation chosen once for all of them.
+        let carry = CarryColumns {
+            joint: i,
+            dof: n,
+            a: jc.a,
+            c,
+            s,
+            d,
+            offset: jc.offset,
+            revolute: jc.revolute,
+        };
+        match jc.twist {
+            Twist::Zero => carry.run(mass, &mut col_force, &mut col_moment, |v| *v),
+            Twist::PlusQuarter => carry.run(mass, &mut col_force, &mut col_moment, |v| {
+                Vector3::new(v.x, -v.z, v.y)
+            }),
+            Twist::MinusQuarter => carry.run(mass, &mut col_force, &mut col_moment, |v| {
+                Vector3::new(v.x, v.z, -v.y)
+            }),
+            Twist::General => carry.run(mass, &mut col_force, &mut col_moment, |v| {
+                Vector3::new(v.x, jc.ca * v.y - jc.sa * v.z, jc.sa * v.y + jc.ca * v.z)
+            }),
+        }
         // Add body i (frame i+1, about its origin), then move the composite to frame i.
         let b = &robot.bodies[i];
         m += b.mass;
         h += b.h;
         inertia.add(&Sym3::from_matrix(&b.inertia_origin));
-        let jc = &robot.consts[i];
-        let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
         let hr = joint_rot(jc, c, s, &h);
         let ir = inertia.rotate_x(jc).rotate_z(c, s);
         if !jc.offset {
@@ -155,25 +260,13 @@ pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData)
         }
         // Spatial force of the composite for unit motion of joint i (z axis of
         // frame i): moment about O_i and force.
-        let (mut moment, mut force) = if jc.revolute {
+        let (moment, force) = if jc.revolute {
             (inertia.column_z(), Vector3::new(-h.y, h.x, 0.0))
         } else {
             (Vector3::new(h.y, -h.x, 0.0), Vector3::new(0.0, 0.0, m))
         };
         mass[(i, i)] = if jc.revolute { moment.z } else { force.z } + jc.rotor;
-        // Carry it down the chain: frame k+1 → frame k.
-        for k in (0..i).rev() {
-            let jk = &robot.consts[k];
-            let (ck, sk, dk) = (data.cos[k], data.sin[k], data.d[k]);
-            let pk = Vector3::new(jk.a * ck, jk.a * sk, dk);
-            force = joint_rot(jk, ck, sk, &force);
-            moment = joint_rot(jk, ck, sk, &moment);
-            if jk.offset {
-                moment += pk.cross(&force);
-            }
-            let mki = if jk.revolute { moment.z } else { force.z };
-            mass[(k, i)] = mki;
-            mass[(i, k)] = mki;
-        }
+        col_force[i] = force;
+        col_moment[i] = moment;
     }
 }

@@ -1,10 +1,11 @@
 //! Forward dynamics for the simulated arm: `qdd = M(q)⁻¹ (tau − h(q, qd))`, with
-//! `M` from CRBA, `h` from RNEA, and an in-place Cholesky factorisation of the
+//! `M` from CRBA, `h` from RNEA, and an in-place `L D Lᵀ` factorisation of the
 //! `dof × dof` block (no allocation).
 
 use super::crba::mass_matrix_from_joint_values;
 use super::rnea::{RneaTerms, rnea_from_joint_values};
 use crate::data::ModelData;
+use crate::isa::{Isa, for_dof, multiversion};
 use crate::kinematics::update_joint_values;
 use crate::robot::Robot;
 use crate::{JointVector, MAX_JOINTS};
@@ -23,18 +24,15 @@ pub enum DynamicsError {
     },
 }
 
-/// Joint accelerations for applied joint torques `tau` (the inverse of
-/// [`crate::rnea`], friction and rotor inertia included). When `M(q)` is singular
-/// (see [`DynamicsError`]) every entry is NaN, so a caller that validates its
-/// outputs refuses it; use [`try_forward_dynamics`] to get the reason.
-pub fn forward_dynamics(
+#[inline(always)]
+pub(crate) fn forward_dynamics_with<S: Isa>(
     robot: &Robot,
     data: &mut ModelData,
     q: &JointVector,
     qd: &JointVector,
     tau: &JointVector,
 ) -> JointVector {
-    match try_forward_dynamics(robot, data, q, qd, tau) {
+    match try_forward_dynamics_with::<S>(robot, data, q, qd, tau) {
         Ok(qdd) => qdd,
         Err(_) => {
             let mut nan = JointVector::zeros();
@@ -46,17 +44,63 @@ pub fn forward_dynamics(
     }
 }
 
-/// [`forward_dynamics`] that reports a singular mass matrix as an error.
-pub fn try_forward_dynamics(
+multiversion! {
+    /// Joint accelerations for applied joint torques `tau` (the inverse of
+    /// [`crate::rnea`], friction and rotor inertia included). When `M(q)` is singular
+    /// (see [`DynamicsError`]) every entry is NaN, so a caller that validates its
+    /// outputs refuses it; use [`try_forward_dynamics`] to get the reason.
+    pub fn forward_dynamics(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+        tau: &JointVector,
+    ) -> JointVector => forward_dynamics_with;
+}
+
+multiversion! {
+    /// [`forward_dynamics`] that reports a singular mass matrix as an error.
+    pub fn try_forward_dynamics(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+        tau: &JointVector,
+    ) -> Result<JointVector, DynamicsError> => try_forward_dynamics_with;
+}
+
+#[inline(always)]
+pub(crate) fn try_forward_dynamics_with<S: Isa>(
     robot: &Robot,
     data: &mut ModelData,
     q: &JointVector,
     qd: &JointVector,
     tau: &JointVector,
 ) -> Result<JointVector, DynamicsError> {
-    let n = robot.dof;
-    update_joint_values(robot, data, q);
-    mass_matrix_from_joint_values(robot, data);
+    for_dof!(robot.dof, |n| solve_forward_dynamics::<S>(
+        robot, data, q, qd, tau, n
+    ))
+}
+
+/// [`try_forward_dynamics`] for the `n = dof` joints.
+#[inline(always)]
+fn solve_forward_dynamics<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+    tau: &JointVector,
+    n: usize,
+) -> Result<JointVector, DynamicsError> {
+    // n <= MAX_JOINTS lets the compiler drop the bounds checks below.
+    let n = n.min(MAX_JOINTS);
+    update_joint_values::<S>(robot, data, q, n);
+    mass_matrix_from_joint_values(robot, data, n);
+    // Factor before the RNEA: the pivots' divisions are a long dependency chain
+    // that the CPU can overlap with the independent RNEA work that follows.
+    // M is symmetric, so its column-major storage reads as rows too.
+    let mut a: Square = data.mass.data.0;
+    let inv_pivot = factor_ldlt(n, &mut a)?;
     let h = rnea_from_joint_values(
         robot,
         data,
@@ -66,58 +110,73 @@ pub fn try_forward_dynamics(
             gravity: true,
             friction: true,
         },
+        n,
     );
-    let mut x = JointVector::zeros();
+    let mut x = [0.0; MAX_JOINTS];
     for i in 0..n {
         x[i] = tau[i] - h[i];
     }
-    // Cholesky M = L Lᵀ on the dof block, lower triangle of data.chol; the
-    // reciprocal pivots are kept so the solves multiply instead of divide.
-    let m = &data.mass;
-    let l = &mut data.chol;
-    let mut scale = 0.0_f64;
-    for j in 0..n {
-        scale = scale.max(m[(j, j)].abs());
-    }
-    let tiny = scale * 1e-14;
-    let mut inv_diag = [0.0; MAX_JOINTS];
-    for j in 0..n {
-        let mut diag = m[(j, j)];
-        for k in 0..j {
-            diag -= l[(j, k)] * l[(j, k)];
-        }
-        if diag.is_nan() || diag <= tiny || tiny == 0.0 {
-            return Err(DynamicsError::SingularMassMatrix {
-                joint: j,
-                pivot: diag,
-            });
-        }
-        let ljj = diag.sqrt();
-        l[(j, j)] = ljj;
-        let inv = 1.0 / ljj;
-        inv_diag[j] = inv;
-        for i in (j + 1)..n {
-            let mut v = m[(i, j)];
-            for k in 0..j {
-                v -= l[(i, k)] * l[(j, k)];
-            }
-            l[(i, j)] = v * inv;
-        }
-    }
-    // L y = x, then Lᵀ qdd = y.
+    // L y = x, D z = y, Lᵀ qdd = z.
     for i in 0..n {
         let mut v = x[i];
         for k in 0..i {
-            v -= l[(i, k)] * x[k];
+            v -= a[i][k] * x[k];
         }
-        x[i] = v * inv_diag[i];
+        x[i] = v;
     }
     for i in (0..n).rev() {
-        let mut v = x[i];
+        let mut v = x[i] * inv_pivot[i];
         for k in (i + 1)..n {
-            v -= l[(k, i)] * x[k];
+            v -= a[k][i] * x[k];
         }
-        x[i] = v * inv_diag[i];
+        x[i] = v;
     }
-    Ok(x)
+    let mut qdd = JointVector::zeros();
+    for i in 0..n {
+        qdd[i] = x[i];
+    }
+    Ok(qdd)
+}
+
+/// An `n × n` block in the top left, `n <= MAX_JOINTS`, row by row.
+type Square = [[f64; MAX_JOINTS]; MAX_JOINTS];
+
+/// `M = L D Lᵀ` in place (`L` unit lower triangular) of the symmetric block
+/// `a`: `L` below the diagonal, `D` on it, `L D` (transposed) above it; returns
+/// `1 / D`. Unlike Cholesky it takes no square roots, which would lengthen the
+/// chain of dependent operations from pivot to pivot. A pivot that is NaN or
+/// not above `1e-14 ×` the largest diagonal entry means `M` is not
+/// (numerically) positive definite.
+#[inline(always)]
+#[allow(clippy::needless_range_loop)] // index loops read like the matrix formulas
+fn factor_ldlt(n: usize, a: &mut Square) -> Result<[f64; MAX_JOINTS], DynamicsError> {
+    let n = n.min(MAX_JOINTS);
+    let mut scale = 0.0_f64;
+    for j in 0..n {
+        scale = scale.max(a[j][j].abs());
+    }
+    let tiny = scale * 1e-14;
+    let mut inv_pivot = [0.0; MAX_JOINTS];
+    for j in 0..n {
+        // a[k][j] = L_jk D_k for k < j (stored when column k was done).
+        let mut pivot = a[j][j];
+        for k in 0..j {
+            pivot -= a[j][k] * a[k][j];
+        }
+        if pivot.is_nan() || pivot <= tiny || tiny == 0.0 {
+            return Err(DynamicsError::SingularMassMatrix { joint: j, pivot });
+        }
+        a[j][j] = pivot;
+        let inv = 1.0 / pivot;
+        inv_pivot[j] = inv;
+        for i in (j + 1)..n {
+            let mut v = a[i][j];
+            for k in 0..j {
+                v -= a[i][k] * a[k][j];
+            }
+            a[j][i] = v;
+            a[i][j] = v * inv;
+        }
+    }
+    Ok(inv_pivot)
 }

@@ -1,6 +1,6 @@
 //! Rigid-body dynamics on the hot path: inverse dynamics by recursive
 //! Newton-Euler ([`rnea`]), the mass matrix by the composite-rigid-body algorithm
-//! ([`mass_matrix`]), and forward dynamics ([`forward_dynamics`]) by a Cholesky
+//! ([`mass_matrix`]), and forward dynamics ([`forward_dynamics`]) by an `L D Lᵀ`
 //! solve of `M qdd = tau − h`. The equation of motion is the seed's eq. 17 plus
 //! actuator and friction terms:
 //!
@@ -10,9 +10,9 @@
 //! Torques are joint-side; divide by the gear ratio for motor torque
 //! ([`crate::Joint::motor_torque`]).
 
-mod crba;
-mod forward;
-mod rnea;
+pub(crate) mod crba;
+pub(crate) mod forward;
+pub(crate) mod rnea;
 
 pub use crba::mass_matrix;
 pub use forward::{DynamicsError, forward_dynamics, try_forward_dynamics};

@@ -1,11 +1,12 @@
 //! Recursive Newton-Euler inverse dynamics in DH link frames: velocities and
 //! accelerations outward from the base, forces and moments inward from the tip.
 
-use crate::JointVector;
 use crate::data::ModelData;
+use crate::isa::{Isa, for_dof, multiversion};
 use crate::kinematics::update_joint_values;
-use crate::math::{joint_rot, joint_rot_t};
-use crate::robot::{Robot, friction};
+use crate::math::{cross_sparse, joint_rot, joint_rot_t, point_accel};
+use crate::robot::{Robot, Sparsity, Twist, friction};
+use crate::{JointVector, MAX_JOINTS};
 use nalgebra::Vector3;
 
 /// Which terms of the equation of motion [`rnea_from_joint_values`] includes.
@@ -15,85 +16,111 @@ pub(crate) struct RneaTerms {
     pub friction: bool,
 }
 
-/// Joint torques for the full equation of motion (see [`crate::dynamics`]):
-/// rigid bodies including the payload, gravity, rotor inertia `I_rotor·qdd`,
-/// viscous and Coulomb friction. Allocation-free.
-pub fn rnea(
+const ALL: RneaTerms = RneaTerms {
+    gravity: true,
+    friction: true,
+};
+
+#[inline(always)]
+pub(crate) fn rnea_with<S: Isa>(
     robot: &Robot,
     data: &mut ModelData,
     q: &JointVector,
     qd: &JointVector,
     qdd: &JointVector,
 ) -> JointVector {
-    update_joint_values(robot, data, q);
-    rnea_from_joint_values(
-        robot,
-        data,
-        qd,
-        qdd,
-        RneaTerms {
-            gravity: true,
-            friction: true,
-        },
-    )
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        rnea_from_joint_values(robot, data, qd, qdd, ALL, n)
+    })
 }
 
-/// `h(q, qd) = C(q, qd) qd + g(q) + friction(qd)`: the torque needed for zero
-/// acceleration.
-pub fn nonlinear_effects(
+#[inline(always)]
+pub(crate) fn nonlinear_effects_with<S: Isa>(
     robot: &Robot,
     data: &mut ModelData,
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
-    update_joint_values(robot, data, q);
-    rnea_from_joint_values(
-        robot,
-        data,
-        qd,
-        &JointVector::zeros(),
-        RneaTerms {
-            gravity: true,
-            friction: true,
-        },
-    )
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), ALL, n)
+    })
 }
 
-/// Gravity torque `g(q)` (the seed's `D_i`, eq. 20).
-pub fn gravity_torque(robot: &Robot, data: &mut ModelData, q: &JointVector) -> JointVector {
-    update_joint_values(robot, data, q);
-    let zero = JointVector::zeros();
-    rnea_from_joint_values(
-        robot,
-        data,
-        &zero,
-        &zero,
-        RneaTerms {
+#[inline(always)]
+pub(crate) fn gravity_torque_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+) -> JointVector {
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        let zero = JointVector::zeros();
+        let terms = RneaTerms {
             gravity: true,
             friction: false,
-        },
-    )
+        };
+        rnea_from_joint_values(robot, data, &zero, &zero, terms, n)
+    })
 }
 
-/// Coriolis and centrifugal torque `C(q, qd) qd` alone (no gravity, no friction;
-/// the seed's `Σ D_ijk qd_j qd_k`, eq. 20).
-pub fn coriolis_torque(
+#[inline(always)]
+pub(crate) fn coriolis_torque_with<S: Isa>(
     robot: &Robot,
     data: &mut ModelData,
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
-    update_joint_values(robot, data, q);
-    rnea_from_joint_values(
-        robot,
-        data,
-        qd,
-        &JointVector::zeros(),
-        RneaTerms {
+    for_dof!(robot.dof, |n| {
+        update_joint_values::<S>(robot, data, q, n);
+        let terms = RneaTerms {
             gravity: false,
             friction: false,
-        },
-    )
+        };
+        rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), terms, n)
+    })
+}
+
+multiversion! {
+    /// Joint torques for the full equation of motion (see [`crate::dynamics`]):
+    /// rigid bodies including the payload, gravity, rotor inertia `I_rotor·qdd`,
+    /// viscous and Coulomb friction. Allocation-free.
+    pub fn rnea(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+        qdd: &JointVector,
+    ) -> JointVector => rnea_with;
+}
+
+multiversion! {
+    /// `h(q, qd) = C(q, qd) qd + g(q) + friction(qd)`: the torque needed for zero
+    /// acceleration.
+    pub fn nonlinear_effects(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+    ) -> JointVector => nonlinear_effects_with;
+}
+
+multiversion! {
+    /// Gravity torque `g(q)` (the seed's `D_i`, eq. 20).
+    pub fn gravity_torque(robot: &Robot, data: &mut ModelData, q: &JointVector) -> JointVector
+        => gravity_torque_with;
+}
+
+multiversion! {
+    /// Coriolis and centrifugal torque `C(q, qd) qd` alone (no gravity, no friction;
+    /// the seed's `Σ D_ijk qd_j qd_k`, eq. 20).
+    pub fn coriolis_torque(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+    ) -> JointVector => coriolis_torque_with;
 }
 
 /// RNEA on joint values already evaluated into `data` (`cos`, `sin`, `d`).
@@ -105,15 +132,16 @@ pub fn coriolis_torque(
 /// `f = m acc + wd×h + w×(w×h)`, `n = I_O wd + w×(I_O w) + h×acc`.
 /// Backward pass: moment about `O_{i-1}` is `n_i + p*×f_i`; its `z` component is
 /// the torque of a revolute joint, `f_i·z` the force of a prismatic one.
-#[inline]
+#[inline(always)]
 pub(crate) fn rnea_from_joint_values(
     robot: &Robot,
     data: &mut ModelData,
     qd: &JointVector,
     qdd: &JointVector,
     terms: RneaTerms,
+    n: usize,
 ) -> JointVector {
-    let n = robot.dof;
+    let n = n.min(MAX_JOINTS);
     let mut w = Vector3::zeros();
     let mut wd = Vector3::zeros();
     let mut acc = if terms.gravity {
@@ -123,8 +151,7 @@ pub(crate) fn rnea_from_joint_values(
     };
     for i in 0..n {
         let jc = &robot.consts[i];
-        let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
-        let pstar = Vector3::new(jc.a, d * jc.sa, d * jc.ca);
+        let (c, s) = (data.cos[i], data.sin[i]);
         let (dq, ddq) = (qd[i], qdd[i]);
         if jc.revolute {
             let wp = Vector3::new(w.x, w.y, w.z + dq);
@@ -132,30 +159,32 @@ pub(crate) fn rnea_from_joint_values(
             w = joint_rot_t(jc, c, s, &wp);
             wd = joint_rot_t(jc, c, s, &wdp);
             acc = joint_rot_t(jc, c, s, &acc);
-            if jc.offset {
-                acc += wd.cross(&pstar) + w.cross(&w.cross(&pstar));
+            if jc.pstar_kind != Sparsity::Zero {
+                acc += point_accel(&w, &wd, &jc.pstar, jc.pstar_kind);
             }
         } else {
+            let d = data.d[i];
+            let pstar = Vector3::new(jc.a, d * jc.sa, d * jc.ca);
             let z = Vector3::new(0.0, jc.sa, jc.ca);
             w = joint_rot_t(jc, c, s, &w);
             wd = joint_rot_t(jc, c, s, &wd);
             acc = joint_rot_t(jc, c, s, &acc)
                 + z * ddq
-                + wd.cross(&pstar)
                 + w.cross(&z) * (2.0 * dq)
-                + w.cross(&w.cross(&pstar));
+                + point_accel(&w, &wd, &pstar, Sparsity::General);
         }
         let b = &robot.bodies[i];
         let (iw, iwd) = match &b.diagonal_inertia {
             Some(diag) => (diag.component_mul(&w), diag.component_mul(&wd)),
             None => (b.inertia_origin * w, b.inertia_origin * wd),
         };
-        if b.has_h {
-            data.force[i] = acc * b.mass + wd.cross(&b.h) + w.cross(&w.cross(&b.h));
-            data.moment[i] = iwd + w.cross(&iw) + b.h.cross(&acc);
-        } else {
+        if b.h_kind == Sparsity::Zero {
             data.force[i] = acc * b.mass;
             data.moment[i] = iwd + w.cross(&iw);
+        } else {
+            // h × acc = −(acc × h)
+            data.force[i] = acc * b.mass + point_accel(&w, &wd, &b.h, b.h_kind);
+            data.moment[i] = iwd + w.cross(&iw) - cross_sparse(&acc, &b.h, b.h_kind);
         }
     }
     let mut tau = JointVector::zeros();
@@ -163,20 +192,35 @@ pub(crate) fn rnea_from_joint_values(
     let mut n_child = Vector3::zeros();
     for i in (0..n).rev() {
         let jc = &robot.consts[i];
-        let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
-        let pstar = Vector3::new(jc.a, d * jc.sa, d * jc.ca);
+        let (c, s) = (data.cos[i], data.sin[i]);
         let f = data.force[i] + f_child;
-        let mut m = data.moment[i] + n_child;
-        if jc.offset {
-            m += pstar.cross(&f);
-        }
-        let t = if jc.revolute {
-            jc.sa * m.y + jc.ca * m.z
+        // Moment about O_{i-1}: + p* × f = − f × p*.
+        let m = if jc.revolute {
+            let m = data.moment[i] + n_child;
+            if jc.pstar_kind == Sparsity::Zero {
+                m
+            } else {
+                m - cross_sparse(&f, &jc.pstar, jc.pstar_kind)
+            }
         } else {
-            jc.sa * f.y + jc.ca * f.z
+            let d = data.d[i];
+            let pstar = Vector3::new(jc.a, d * jc.sa, d * jc.ca);
+            data.moment[i] + n_child - f.cross(&pstar)
+        };
+        // Joint axis z_{i-1} in frame i is (0, sα, cα).
+        let along_axis = |v: &Vector3<f64>| match jc.twist {
+            Twist::Zero => v.z,
+            Twist::PlusQuarter => v.y,
+            Twist::MinusQuarter => -v.y,
+            Twist::General => jc.sa * v.y + jc.ca * v.z,
+        };
+        let t = if jc.revolute {
+            along_axis(&m)
+        } else {
+            along_axis(&f)
         };
         let mut extra = jc.rotor * qdd[i];
-        if terms.friction {
+        if terms.friction && (jc.viscous != 0.0 || jc.coulomb != 0.0) {
             extra += friction(jc.viscous, jc.coulomb, qd[i]);
         }
         tau[i] = t + extra;

@@ -16,9 +16,11 @@
 //!   motion back under vmax, as Ruckig does.
 //! * [`stretch`]: the same motion finishing exactly at a longer duration T: ramp to a
 //!   lower peak velocity vp, cruise, ramp down; vp solves the distance equation.
+//!   `reach` gives the exact set of durations it (or "stop, then move") can take.
 
 pub mod brake;
 pub mod from_state;
+mod reach;
 pub mod rest_to_rest;
 pub mod stretch;
 pub mod velocity;

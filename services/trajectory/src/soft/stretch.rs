@@ -5,13 +5,14 @@
 //! For a given T the cruise takes what the ramps leave, and vp solves the distance
 //! equation D1(vp) + vp·Tc + D2(vp) = d, a bracketed root. From rest, and whenever
 //! the optimal motion's acceleration crosses zero at its velocity peak, the family's
-//! fastest member *is* the time-optimal motion. Where the family has no member of
-//! the requested duration, "stop, then a rest-to-rest move" covers every duration from
-//! [`Stretch::guaranteed`] on; durations in between are reported as blocked (`None`),
-//! and synchronisation moves on to a duration every joint reaches, as Ruckig's time
-//! synchronisation does with its blocked intervals.
+//! fastest member *is* the time-optimal motion. "Stop, then a rest-to-rest move"
+//! covers every duration from [`Stretch::guaranteed`] on. Durations neither reaches
+//! (blocked intervals, exact: [`super::reach`]) are reported as `None`, and
+//! [`Stretch::next_reachable`] names the end of the blocked interval, where
+//! synchronisation moves on to, as Ruckig's time synchronisation does.
 
 use super::from_state::brake_point;
+use super::reach::{Reach, zero_cruise};
 use super::velocity::{ramp, ramp_from_rest, velocity_change};
 use super::{Kin, Limits1, Phases, newton_increasing, rest_to_rest, stop_velocity};
 
@@ -74,24 +75,10 @@ impl Stretch {
         }
         let sg = if d >= pb { 1.0 } else { -1.0 };
         let (v, a, dd) = (sg * v0, sg * a0, sg * d);
-        // Zero-cruise distance D(vp) = D1 + D2 and its slope
-        // D' = vp·(T1' + T2') + (a1 + a2)/(2J) (see [`Stretch::eval`]).
+        // Zero-cruise distance D(vp) = D1 + D2 and its slope (see [`zero_cruise`]).
         let dist = |vp: f64| {
-            let r1 = ramp(v, a, vp, lim);
-            let k = r1.integrate(Kin { p: 0.0, v, a });
-            let (t1, t2, d2) = ramp_from_rest(vp, lim);
-            let s1 = r1.j.signum();
-            let dt1 = if r1.t[1] > 0.0 {
-                s1 / lim.a
-            } else {
-                s1 / (r1.t[2] * lim.j)
-            };
-            let dt2 = if t2 > 0.0 {
-                1.0 / lim.a
-            } else {
-                1.0 / (t1 * lim.j)
-            };
-            (k.p + d2, vp * (dt1 + dt2) + 0.5 * (r1.t[2] + t1))
+            let (x, dx, _) = zero_cruise(v, a, vp, lim);
+            (x, dx)
         };
         let vp_hi = if let Some(vp) = anchor {
             vp.clamp(0.0, lim.v)
@@ -142,12 +129,28 @@ impl Stretch {
             + rest_to_rest::time_optimal_duration((self.d - self.pb).abs(), lim)
     }
 
+    /// The smallest duration ≥ `t` that [`Stretch::phases`] reaches: `t` itself
+    /// unless it lies in a blocked interval, else that interval's end (see
+    /// [`super::reach`]). Synchronisation raises T to it.
+    pub fn next_reachable(&self, t: f64) -> f64 {
+        if self.rest {
+            return t.max(self.t_r2r);
+        }
+        self.reach().next(t)
+    }
+
+    /// The exact reachable durations (computed on demand: a few root searches).
+    fn reach(&self) -> Reach {
+        Reach::new(self.v0, self.a0, self.d, &self.lim, self.guaranteed())
+    }
+
     /// Phases (original frame) finishing at exactly `t`, or `None` when this family
     /// has no member of that duration (t below the minimum, or in a blocked interval).
     ///
     /// Search: f(vp) = D1 + D2 + vp·Tc − d on peak velocities where the cruise Tc ≥ 0,
-    /// from the upper anchor down: first between the stop velocity and the anchor
-    /// (where Tc is monotone), then on a 16-point grid; last resort "stop, then move".
+    /// from the upper anchor down between the stop velocity and the anchor (where Tc
+    /// is monotone); when that finds nothing, on the exact member interval whose
+    /// durations hold t ([`super::reach`]); last resort "stop, then move".
     pub fn phases(&self, t: f64, lim: &Limits1) -> Option<Phases> {
         let mut ph = if self.rest {
             if t < self.t_r2r * (1.0 - 1e-12) {
@@ -285,41 +288,19 @@ impl Stretch {
             };
         }
         if vp.is_none() {
-            vp = self.grid_search(u, (top.f, top.ok), t, lim);
+            vp = self.interval_search(t, lim);
         }
         vp
     }
 
-    /// Fallback: a 16-point grid from u down to 0 for a sign change between two valid
-    /// points, then safeguarded Newton inside it.
-    fn grid_search(&self, u: f64, (fu, ok_u): (f64, bool), t: f64, lim: &Limits1) -> Option<f64> {
-        let bracket = grid_bracket(u, (fu, ok_u), |x| {
-            let e = self.eval(x, t, lim);
-            (e.f, e.ok)
-        });
-        let ((lo, flo), (hi, fhi)) = bracket?;
-        // f increases on the valid part of the bracket; an invalid point (negative
-        // cruise) counts as below the root, and its NaN slope makes Newton bisect.
-        let vp = newton_increasing(
-            |vp| {
-                let e = self.eval(vp, t, lim);
-                if e.ok {
-                    (e.f, e.df)
-                } else {
-                    (-1.0 - self.d.abs(), f64::NAN)
-                }
-            },
-            lo,
-            hi,
-            if fhi > flo {
-                (lo * fhi - hi * flo) / (fhi - flo)
-            } else {
-                hi
-            },
-            1e-14 * (1.0 + self.d.abs()),
-        );
-        let e = self.eval(vp, t, lim);
-        (e.ok && e.f.abs() <= 1e-9 * (1.0 + self.d.abs())).then_some(vp)
+    /// Fallback: the root of f on the exact member interval [l, u] whose durations
+    /// hold `t` (f increases there, f(l) ≤ 0 ≤ f(u)).
+    fn interval_search(&self, t: f64, lim: &Limits1) -> Option<f64> {
+        let (l, u) = self.reach().interval_of(t)?;
+        match self.descend(l, self.eval(u, t, lim), t, lim) {
+            Descent::Root(x) => Some(x),
+            _ => None,
+        }
     }
 
     /// Fastest stop, then a rest-to-rest move taking the remaining time.
@@ -374,7 +355,9 @@ enum Descent {
 /// Scans a 16-point grid from `u` (where f = `fu`, valid if `ok_u`) down to 0 for the
 /// first sign change (f ≥ 0 above, ≤ 0 below) between two neighbouring valid points;
 /// `g(x)` returns f(x) and whether x is valid. Returns the bracket ((lo, f(lo)),
-/// (hi, f(hi))).
+/// (hi, f(hi))). The old fallback search, kept for the tests' bracketing oracle (the
+/// exact member intervals of [`super::reach`] replaced it).
+#[cfg(test)]
 fn grid_bracket(
     u: f64,
     (fu, ok_u): (f64, bool),

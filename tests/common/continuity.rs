@@ -1,0 +1,186 @@
+//! Continuity checks of recorded streams, with thresholds derived from the robot's limits
+//! and the period (never from timing): the setpoint stream must not jump in q, q̇ or q̈,
+//! the applied torque must not step.
+
+use microrobot_messages::{JointSetpoint, JointState, setpoint_flags};
+use microrobot_model::Robot;
+
+/// Per-joint limits of the robot under test (SI).
+#[derive(Debug, Clone)]
+pub struct Limits {
+    pub dof: usize,
+    pub min: Vec<f64>,
+    pub max: Vec<f64>,
+    pub vel: Vec<f64>,
+    pub acc: Vec<f64>,
+    pub jerk: Vec<f64>,
+    pub effort: Vec<f64>,
+}
+
+impl Limits {
+    /// The limits of the seed arm.
+    pub fn seed_arm() -> Self {
+        let robot = Robot::from_file(&super::seed_arm()).expect("seed arm");
+        let j = robot.joints();
+        let f = |g: fn(&microrobot_model::Joint) -> f64| j.iter().map(g).collect::<Vec<_>>();
+        Self {
+            dof: robot.dof(),
+            min: f(|j| j.limits.min),
+            max: f(|j| j.limits.max),
+            vel: f(|j| j.limits.velocity),
+            acc: f(|j| j.limits.acceleration),
+            jerk: f(|j| j.limits.jerk),
+            effort: f(|j| j.limits.effort),
+        }
+    }
+}
+
+/// Splits a stream into the runs of one publisher each: a new run starts wherever the
+/// sequence number does not increase (a restarted process starts again at 1).
+pub fn segments<T>(v: &[T], seq: impl Fn(&T) -> u64) -> Vec<&[T]> {
+    let mut out = Vec::new();
+    let mut start = 0;
+    for i in 1..v.len() {
+        if seq(&v[i]) <= seq(&v[i - 1]) {
+            out.push(&v[start..i]);
+            start = i;
+        }
+    }
+    if start < v.len() {
+        out.push(&v[start..]);
+    }
+    out
+}
+
+/// What [`setpoint_jumps`] found.
+#[derive(Debug, Default)]
+pub struct SetpointReport {
+    /// Violations, as readable lines (empty: no jump).
+    pub jumps: Vec<String>,
+    /// Setpoints where the planner re-synchronised to the measured state (flag
+    /// `HOLD_FOR_SAFE_STATE` rising): allowed, the actuator ignores setpoints then.
+    pub resyncs: usize,
+    /// Largest |q| excursion beyond the position limits (rad or m).
+    pub beyond_position_limits: f64,
+}
+
+/// Checks every pair of consecutive setpoints of one planner process:
+/// * planned motion: |q_b − q_a − ½(q̇_a + q̇_b)h| ≤ a_max h², |q̇_b − q̇_a| ≤ 1.01 a_max h,
+///   |q̈_b − q̈_a| ≤ 1.01 j_max h (a jerk-limited stream; h = ticks × period);
+/// * while following the measured state (`HOLD_FOR_SAFE_STATE`): |Δq| ≤ 1.05 v_max h;
+/// * |q̇| ≤ 1.01 v_max and q within the position limits everywhere.
+pub fn setpoint_jumps(sp: &[JointSetpoint], lim: &Limits, period_s: f64) -> SetpointReport {
+    let mut r = SetpointReport::default();
+    let hold = |s: &JointSetpoint| s.flags & setpoint_flags::HOLD_FOR_SAFE_STATE != 0;
+    for seg in segments(sp, |s| s.header.seq) {
+        for w in seg.windows(2) {
+            let (a, b) = (&w[0], &w[1]);
+            let ticks = b.header.tick.saturating_sub(a.header.tick).max(1);
+            let h = ticks as f64 * period_s;
+            if hold(b) && !hold(a) {
+                r.resyncs += 1;
+                continue;
+            }
+            for j in 0..lim.dof {
+                let at = |what: &str, v: f64| {
+                    format!(
+                        "{what} {v:.3e} at joint {} tick {} (seq {} -> {})",
+                        j + 1,
+                        b.header.tick,
+                        a.header.seq,
+                        b.header.seq
+                    )
+                };
+                if hold(b) {
+                    let dq = (b.q[j] - a.q[j]).abs();
+                    if dq > 1.05 * lim.vel[j] * h + 1e-9 {
+                        r.jumps.push(at("measured-state follow jump (rad)", dq));
+                    }
+                    continue;
+                }
+                let dq = b.q[j] - a.q[j] - 0.5 * (a.qd[j] + b.qd[j]) * h;
+                if dq.abs() > lim.acc[j] * h * h + 1e-9 {
+                    r.jumps.push(at("position jump (rad)", dq));
+                }
+                let dqd = b.qd[j] - a.qd[j];
+                if dqd.abs() > lim.acc[j] * h * 1.01 + 1e-9 {
+                    r.jumps.push(at("velocity jump (rad/s)", dqd));
+                }
+                let dqdd = b.qdd[j] - a.qdd[j];
+                if dqdd.abs() > lim.jerk[j] * h * 1.01 + 1e-9 {
+                    r.jumps.push(at("acceleration jump (rad/s²)", dqdd));
+                }
+            }
+        }
+        for s in seg {
+            for j in 0..lim.dof {
+                if s.qd[j].abs() > lim.vel[j] * 1.01 + 1e-9 {
+                    r.jumps.push(format!(
+                        "velocity {} beyond the limit {} at joint {} tick {}",
+                        s.qd[j],
+                        lim.vel[j],
+                        j + 1,
+                        s.header.tick
+                    ));
+                }
+                let beyond = (lim.min[j] - s.q[j]).max(s.q[j] - lim.max[j]).max(0.0);
+                r.beyond_position_limits = r.beyond_position_limits.max(beyond);
+            }
+        }
+    }
+    r.jumps.truncate(20);
+    r
+}
+
+/// Largest |Δτ_applied| per joint between consecutive states of one actuator process
+/// (the first state of a process is skipped: it is published before any torque is
+/// applied), over the states for which `keep` holds.
+pub fn torque_slew(
+    states: &[JointState],
+    dof: usize,
+    keep: impl Fn(&JointState) -> bool,
+) -> Vec<f64> {
+    let mut out = vec![0.0f64; dof];
+    for seg in segments(states, |s| s.header.seq) {
+        for w in seg.windows(2).skip(1) {
+            if !keep(&w[0]) || !keep(&w[1]) {
+                continue;
+            }
+            for (j, o) in out.iter_mut().enumerate() {
+                *o = o.max((w[1].tau_applied[j] - w[0].tau_applied[j]).abs());
+            }
+        }
+    }
+    out
+}
+
+/// Largest |τ_applied| per joint.
+pub fn torque_peak(states: &[JointState], dof: usize) -> Vec<f64> {
+    let mut out = vec![0.0f64; dof];
+    for s in states {
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = o.max(s.tau_applied[j].abs());
+        }
+    }
+    out
+}
+
+/// The torque step bound per joint: the slew of healthy motion (`healthy`), plus what a
+/// switch between two laws blended over `ramp_steps` may add per step — at most the
+/// distance between two torques of magnitude ≤ `peak`, divided by the ramp. An
+/// unblended switch exceeds it by a factor of about `ramp_steps`.
+pub fn torque_step_bound(healthy: &[f64], peak: &[f64], ramp_steps: f64) -> Vec<f64> {
+    healthy
+        .iter()
+        .zip(peak)
+        .map(|(h, p)| 1.5 * h + 2.0 * p / ramp_steps + 1e-3)
+        .collect()
+}
+
+/// The newest state published at or before `stamp_ns`.
+pub fn state_at(states: &[JointState], stamp_ns: u64) -> Option<&JointState> {
+    states
+        .iter()
+        .take_while(|s| s.header.stamp_ns <= stamp_ns)
+        .last()
+}

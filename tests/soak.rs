@@ -1,0 +1,83 @@
+//! `microrobot soak` through the real binary: a short soak with one kill of each service
+//! (planner, dynamics, actuator, in that order) and random commands. Asserts the
+//! report's verdict fields, never its timing figures.
+
+mod common;
+
+use common::*;
+
+#[test]
+fn a_short_soak_with_a_kill_of_each_service_recovers_without_jumps_or_losses() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("soak");
+    let cfg = write_config(dir.path(), &inst, "", "");
+    let out = dir.path().join("soak");
+    let done = run(
+        &[
+            "soak",
+            "--config",
+            cfg.to_str().expect("utf-8"),
+            "--instance",
+            &inst,
+            "--duration",
+            "32s",
+            "--kill-every",
+            "5",
+            "--random-commands",
+            "--quiet",
+            "--out",
+            out.to_str().expect("utf-8"),
+        ],
+        240.0,
+    );
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap_or_else(|e| {
+        panic!(
+            "no report.json ({e}); exit {:?}\nstdout:\n{}\nstderr:\n{}",
+            done.code(),
+            done.stdout,
+            done.stderr
+        )
+    });
+    let r: serde_json::Value = serde_json::from_str(&text).expect("report is JSON");
+    let v = &r["verdict"];
+    let ctx = || {
+        format!(
+            "verdict {v}\nfaults {}\njumps {}\nstderr:\n{}",
+            r["faults"], r["jumps"], done.stderr
+        )
+    };
+    assert_eq!(v["jumps"], 0, "{}", ctx());
+    assert_eq!(v["lost_setpoints_outside_kill_windows"], 0, "{}", ctx());
+    assert_eq!(v["lost_outside_kill_windows"], 0, "{}", ctx());
+    assert_eq!(v["latches_without_fault"], 0, "{}", ctx());
+    let injected = v["faults_injected"].as_u64().expect("faults_injected");
+    assert_eq!(injected, 3, "one kill per service: {}", ctx());
+    assert_eq!(v["faults_recovered"].as_u64(), Some(injected), "{}", ctx());
+    let killed: Vec<&str> = r["faults"]
+        .as_array()
+        .expect("faults")
+        .iter()
+        .filter_map(|f| f["role"].as_str())
+        .collect();
+    assert_eq!(killed, ["planner", "dynamics", "actuator"], "{}", ctx());
+    assert_eq!(v["pass"], true, "{}", ctx());
+    assert_eq!(done.code(), Some(0), "{}", ctx());
+    // The markdown is rendered from the same report, and `--render` reproduces it.
+    let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
+    assert!(md.contains("**Verdict: PASS**"), "{md}");
+    let rendered = dir.path().join("rendered.md");
+    let r2 = run(
+        &[
+            "soak",
+            "--render",
+            out.join("report.json").to_str().expect("utf-8"),
+            "--title",
+            "Soak report",
+            "--out",
+            rendered.to_str().expect("utf-8"),
+        ],
+        30.0,
+    );
+    assert_eq!(r2.code(), Some(0), "{}", r2.stderr);
+    assert_eq!(std::fs::read_to_string(&rendered).expect("rendered"), md);
+}

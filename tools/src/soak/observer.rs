@@ -1,0 +1,464 @@
+//! The soak's online observer: a thread that drains the setpoint, torque, state and
+//! status streams of the instance (every [`POLL_MS`] ms; each subscriber queues 64
+//! messages, 64 ms at 1 kHz), checks every consecutive pair for continuity
+//! ([`super::continuity`]), and keeps only what the report needs: health edges (for the
+//! time to detect and recover each fault), safe-state latches, lost-message increments
+//! of the services, resource samples, and its own receive gaps.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use microrobot_messages::{
+    JointSetpoint, JointState, LifecycleState, ServiceKind, ServiceRole, ServiceStatus,
+    TorqueCommand, monotonic_ns, open_publish_subscribe, setpoint_flags, state_flags, torque_flags,
+};
+use serde::{Deserialize, Serialize};
+
+use super::continuity::{self, Bounds, Jump};
+
+/// Drain period of the observer thread.
+pub const POLL_MS: u64 = 2;
+/// A resource sample per service at most this often.
+const RESOURCE_SAMPLE_NS: u64 = 2_000_000_000;
+
+/// A change of health seen on a stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum EdgeKind {
+    /// The actuator reports stale commands or its safe state (or is not active).
+    StateUnhealthy,
+    /// The actuator follows fresh torque commands again.
+    StateHealthy,
+    /// The safe state latched (rising edge of SAFE_STATE, or a restart that came up in it).
+    Latch,
+    /// Dynamics computes without fresh measured state.
+    TorqueStale,
+    TorqueFresh,
+    /// The planner mirrors the measured arm (the actuator's safe state).
+    SetpointHold,
+    SetpointFree,
+    /// A new publisher (process) on the stream.
+    NewSetpointPublisher,
+    NewTorquePublisher,
+    NewStatePublisher,
+}
+
+/// One edge, stamped with the message's own `CLOCK_MONOTONIC` time.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct Edge {
+    pub stamp_ns: u64,
+    pub kind: EdgeKind,
+}
+
+/// Lost messages a service counted between two of its statuses.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Loss {
+    pub stamp_ns: u64,
+    pub role: String,
+    pub count: u64,
+}
+
+/// One resource sample of one service process.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct ResourceSample {
+    pub stamp_ns: u64,
+    pub pid: u32,
+    pub rss_kib: u64,
+    pub cpu_time_ms: u32,
+}
+
+/// What the observer hands back at the end.
+#[derive(Debug, Default)]
+pub struct Observed {
+    pub edges: Vec<Edge>,
+    pub jumps: Vec<Jump>,
+    pub losses: Vec<Loss>,
+    /// Per role (planner, dynamics, actuator).
+    pub resources: [Vec<ResourceSample>; 3],
+    /// Messages received per stream (setpoint, torque, state, status).
+    pub received: [u64; 4],
+    /// Messages the observer itself missed (its queue overflowed), per stream.
+    pub observer_gaps: [u64; 4],
+    /// Jumps dropped from `jumps` beyond [`MAX_JUMPS_KEPT`] (still counted).
+    pub jumps_not_listed: u64,
+}
+
+/// Jumps kept with details (all are counted).
+pub const MAX_JUMPS_KEPT: usize = 1000;
+
+/// Live counters for the progress line.
+#[derive(Debug, Default)]
+pub struct Live {
+    pub jumps: AtomicU64,
+    pub latches: AtomicU64,
+    pub setpoints: AtomicU64,
+}
+
+/// The state the supervisor handed to a restarting actuator (the reference its first
+/// state must equal).
+pub type Handover = Arc<Mutex<Option<JointState>>>;
+
+/// The running observer thread.
+pub struct Observer {
+    stop: Arc<AtomicBool>,
+    pub live: Arc<Live>,
+    pub handover: Handover,
+    handle: Option<JoinHandle<anyhow::Result<Observed>>>,
+}
+
+fn subscriber<T: std::fmt::Debug + ZeroCopySend + 'static>(
+    node: &Node<ipc::Service>,
+    instance: &str,
+    kind: ServiceKind,
+) -> anyhow::Result<Subscriber<ipc::Service, T, ()>> {
+    open_publish_subscribe::<T>(node, instance, kind)?
+        .subscriber_builder()
+        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
+        .create()
+        .map_err(|e| anyhow::anyhow!("{} subscriber: {e:?}", kind.stream_name()))
+}
+
+impl Observer {
+    /// Opens the subscribers (before the pipeline starts, so nothing is missed) and
+    /// starts the thread.
+    pub fn start(instance: &str, bounds: Bounds) -> anyhow::Result<Self> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let live = Arc::new(Live::default());
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let inst = instance.to_string();
+        let handover: Handover = Arc::new(Mutex::new(None));
+        let (s2, l2, h2) = (stop.clone(), live.clone(), handover.clone());
+        let handle = std::thread::Builder::new()
+            .name("soak-observer".into())
+            .spawn(move || {
+                let node_name = format!("microrobot-soak-observer.{inst}");
+                let setup = (|| -> anyhow::Result<_> {
+                    let name: NodeName = node_name
+                        .as_str()
+                        .try_into()
+                        .map_err(|e| anyhow::anyhow!("node name {node_name}: {e:?}"))?;
+                    let node = NodeBuilder::new()
+                        .name(&name)
+                        .signal_handling_mode(SignalHandlingMode::Disabled)
+                        .create::<ipc::Service>()
+                        .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+                    let sp = subscriber::<JointSetpoint>(&node, &inst, ServiceKind::Setpoint)?;
+                    let tq = subscriber::<TorqueCommand>(&node, &inst, ServiceKind::Torque)?;
+                    let st = subscriber::<JointState>(&node, &inst, ServiceKind::State)?;
+                    let ss = subscriber::<ServiceStatus>(&node, &inst, ServiceKind::Status)?;
+                    Ok((node, sp, tq, st, ss))
+                })();
+                let (_node, sp, tq, st, ss) = match setup {
+                    Ok(v) => {
+                        let _ = ready_tx.send(Ok(()));
+                        v
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(format!("{e:#}")));
+                        return Err(e);
+                    }
+                };
+                let mut checker = Checker::new(bounds, l2, h2);
+                loop {
+                    let stopping = s2.load(Ordering::SeqCst);
+                    while let Ok(Some(s)) = sp.receive() {
+                        let p = s.header().publisher_id().value();
+                        checker.setpoint(&s, p);
+                    }
+                    while let Ok(Some(s)) = tq.receive() {
+                        let p = s.header().publisher_id().value();
+                        checker.torque(&s, p);
+                    }
+                    while let Ok(Some(s)) = st.receive() {
+                        let p = s.header().publisher_id().value();
+                        checker.state(&s, p);
+                    }
+                    while let Ok(Some(s)) = ss.receive() {
+                        checker.status(&s);
+                    }
+                    if stopping {
+                        break;
+                    }
+                    std::thread::sleep(Duration::from_millis(POLL_MS));
+                }
+                Ok(checker.out)
+            })?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => anyhow::bail!("soak observer: {e}"),
+            Err(_) => anyhow::bail!("soak observer thread ended at start"),
+        }
+        Ok(Self {
+            stop,
+            live,
+            handover,
+            handle: Some(handle),
+        })
+    }
+
+    /// Stops the thread after a last drain and returns what it saw.
+    pub fn finish(mut self) -> anyhow::Result<Observed> {
+        self.stop.store(true, Ordering::SeqCst);
+        match self.handle.take().map(|h| h.join()) {
+            Some(Ok(r)) => r,
+            Some(Err(_)) => anyhow::bail!("the soak observer thread panicked"),
+            None => anyhow::bail!("the soak observer was already finished"),
+        }
+    }
+}
+
+/// The last message of a stream and the publisher it came from.
+struct Last<T> {
+    msg: T,
+    publisher: u128,
+}
+
+/// The per-stream state of the checks (no I/O; fed one message at a time).
+pub struct Checker {
+    bounds: Bounds,
+    live: Arc<Live>,
+    handover: Handover,
+    pub out: Observed,
+    setpoint: Option<Last<JointSetpoint>>,
+    /// Set on a new planner process: its first free setpoint is judged against the
+    /// measured state.
+    planner_started: bool,
+    setpoint_hold: bool,
+    torque: Option<Last<TorqueCommand>>,
+    torque_stale: bool,
+    state: Option<Last<JointState>>,
+    /// The predecessor's last state, until the restarted actuator's first plant step.
+    resumed_from: Option<JointState>,
+    state_healthy: Option<bool>,
+    state_safe: bool,
+    /// Per role: last status (pid, lost, last resource sample time).
+    status: [Option<(u32, u64, u64)>; 3],
+}
+
+fn role_slot(role: ServiceRole) -> usize {
+    crate::supervisor::monitor::slot(role)
+}
+
+impl Checker {
+    pub fn new(bounds: Bounds, live: Arc<Live>, handover: Handover) -> Self {
+        Self {
+            bounds,
+            live,
+            handover,
+            out: Observed::default(),
+            setpoint: None,
+            planner_started: false,
+            setpoint_hold: false,
+            torque: None,
+            torque_stale: false,
+            state: None,
+            resumed_from: None,
+            state_healthy: None,
+            state_safe: false,
+            status: [None; 3],
+        }
+    }
+
+    fn edge(&mut self, stamp_ns: u64, kind: EdgeKind) {
+        if kind == EdgeKind::Latch {
+            self.live.latches.fetch_add(1, Ordering::Relaxed);
+        }
+        self.out.edges.push(Edge { stamp_ns, kind });
+    }
+
+    /// Records `found`, each annotated with the wall time between the pair's two
+    /// messages (far from one period: a host stall, or the catch-up after one).
+    fn jumps_after(&mut self, mut found: Vec<Jump>, prev_stamp_ns: Option<u64>, stamp_ns: u64) {
+        if let Some(p) = prev_stamp_ns {
+            let gap_ms = (stamp_ns as f64 - p as f64) * 1e-6;
+            for j in &mut found {
+                j.context = format!("{}; {gap_ms:.3} ms after the previous message", j.context);
+            }
+        }
+        self.jumps(found);
+    }
+
+    fn jumps(&mut self, mut found: Vec<Jump>) {
+        if found.is_empty() {
+            return;
+        }
+        self.live
+            .jumps
+            .fetch_add(found.len() as u64, Ordering::Relaxed);
+        let room = MAX_JUMPS_KEPT.saturating_sub(self.out.jumps.len());
+        if found.len() > room {
+            self.out.jumps_not_listed += (found.len() - room) as u64;
+            found.truncate(room);
+        }
+        self.out.jumps.append(&mut found);
+    }
+
+    pub fn setpoint(&mut self, m: &JointSetpoint, publisher: u128) {
+        self.out.received[0] += 1;
+        self.live.setpoints.fetch_add(1, Ordering::Relaxed);
+        let mut found = Vec::new();
+        let hold = m.flags & setpoint_flags::HOLD_FOR_SAFE_STATE != 0;
+        match &self.setpoint {
+            Some(last) if last.publisher == publisher => {
+                let gap = m.header.seq.saturating_sub(last.msg.header.seq + 1);
+                self.out.observer_gaps[0] += gap;
+                if self.planner_started && !hold {
+                    self.planner_start_check(m, &mut found);
+                } else {
+                    continuity::setpoint_pair(&self.bounds, &last.msg, m, &mut found);
+                }
+            }
+            prev => {
+                if prev.is_some() {
+                    self.edge(m.header.stamp_ns, EdgeKind::NewSetpointPublisher);
+                }
+                self.planner_started = true;
+                if !hold {
+                    self.planner_start_check(m, &mut found);
+                }
+            }
+        }
+        if hold != self.setpoint_hold {
+            self.setpoint_hold = hold;
+            let k = if hold {
+                EdgeKind::SetpointHold
+            } else {
+                EdgeKind::SetpointFree
+            };
+            self.edge(m.header.stamp_ns, k);
+        }
+        let prev = self.setpoint.as_ref().map(|l| l.msg.header.stamp_ns);
+        self.jumps_after(found, prev, m.header.stamp_ns);
+        self.setpoint = Some(Last { msg: *m, publisher });
+    }
+
+    /// A (re)started planner's first free setpoint against the newest measured state.
+    fn planner_start_check(&mut self, m: &JointSetpoint, found: &mut Vec<Jump>) {
+        self.planner_started = false;
+        if let Some(s) = &self.state {
+            let age = m.header.stamp_ns.saturating_sub(s.msg.header.stamp_ns) as f64 * 1e-9;
+            continuity::setpoint_start(&self.bounds, &s.msg, age, m, found);
+        }
+    }
+
+    pub fn torque(&mut self, m: &TorqueCommand, publisher: u128) {
+        self.out.received[1] += 1;
+        let mut found = Vec::new();
+        match &self.torque {
+            Some(last) if last.publisher == publisher => {
+                let gap = m.header.seq.saturating_sub(last.msg.header.seq + 1);
+                self.out.observer_gaps[1] += gap;
+                continuity::torque_pair(&self.bounds, &last.msg, m, &mut found);
+            }
+            Some(_) => self.edge(m.header.stamp_ns, EdgeKind::NewTorquePublisher),
+            None => {}
+        }
+        let stale = m.flags & torque_flags::STATE_STALE != 0;
+        if stale != self.torque_stale {
+            self.torque_stale = stale;
+            let k = if stale {
+                EdgeKind::TorqueStale
+            } else {
+                EdgeKind::TorqueFresh
+            };
+            self.edge(m.header.stamp_ns, k);
+        }
+        let prev = self.torque.as_ref().map(|l| l.msg.header.stamp_ns);
+        self.jumps_after(found, prev, m.header.stamp_ns);
+        self.torque = Some(Last { msg: *m, publisher });
+    }
+
+    pub fn state(&mut self, m: &JointState, publisher: u128) {
+        self.out.received[2] += 1;
+        let mut found = Vec::new();
+        match &self.state {
+            Some(last) if last.publisher == publisher => {
+                let steps = m.header.seq.saturating_sub(last.msg.header.seq);
+                self.out.observer_gaps[2] += steps.saturating_sub(1);
+                match self.resumed_from {
+                    // The restarted actuator's first plant step: its applied torque
+                    // against its predecessor's last one.
+                    Some(prev) if steps == 1 => {
+                        self.resumed_from = None;
+                        continuity::applied_torque_resume(&self.bounds, &prev, m, &mut found);
+                        let mut from = last.msg;
+                        from.tau_applied = m.tau_applied;
+                        continuity::state_pair(&self.bounds, &from, m, 1, &mut found);
+                    }
+                    Some(_) => self.resumed_from = None,
+                    None => continuity::state_pair(&self.bounds, &last.msg, m, steps, &mut found),
+                }
+            }
+            Some(last) => {
+                // The reference: what the supervisor handed over (it drained the dead
+                // actuator's stream after its exit), else the last state seen here.
+                let handed = self.handover.lock().ok().and_then(|mut h| h.take());
+                let prev = handed.unwrap_or(last.msg);
+                self.edge(m.header.stamp_ns, EdgeKind::NewStatePublisher);
+                continuity::state_resume(&self.bounds, &prev, m, &mut found);
+                self.resumed_from = Some(prev);
+            }
+            None => {}
+        }
+        let safe = m.flags & state_flags::SAFE_STATE != 0;
+        if safe && !self.state_safe {
+            self.edge(m.header.stamp_ns, EdgeKind::Latch);
+        }
+        self.state_safe = safe;
+        let healthy = m.flags & (state_flags::SAFE_STATE | state_flags::COMMAND_STALE) == 0
+            && m.lifecycle == LifecycleState::Active as u32;
+        if self.state_healthy != Some(healthy) {
+            // The very first state (before any torque) is not an edge.
+            if self.state_healthy.is_some() {
+                let k = if healthy {
+                    EdgeKind::StateHealthy
+                } else {
+                    EdgeKind::StateUnhealthy
+                };
+                self.edge(m.header.stamp_ns, k);
+            }
+            self.state_healthy = Some(healthy);
+        }
+        let prev = self.state.as_ref().map(|l| l.msg.header.stamp_ns);
+        self.jumps_after(found, prev, m.header.stamp_ns);
+        self.state = Some(Last { msg: *m, publisher });
+    }
+
+    pub fn status(&mut self, m: &ServiceStatus) {
+        self.out.received[3] += 1;
+        let Some(role) = ServiceRole::from_wire(m.role) else {
+            return;
+        };
+        let i = role_slot(role);
+        let (lost_before, sampled_at) = match self.status[i] {
+            Some((pid, lost, at)) if pid == m.pid => (lost, at),
+            _ => (0, 0),
+        };
+        if m.lost_messages > lost_before {
+            self.out.losses.push(Loss {
+                stamp_ns: m.stamp_ns,
+                role: role.name().to_string(),
+                count: m.lost_messages - lost_before,
+            });
+        }
+        let mut at = sampled_at;
+        if m.stamp_ns.saturating_sub(sampled_at) >= RESOURCE_SAMPLE_NS {
+            at = m.stamp_ns;
+            self.out.resources[i].push(ResourceSample {
+                stamp_ns: m.stamp_ns,
+                pid: m.pid,
+                rss_kib: m.rss_kib,
+                cpu_time_ms: m.cpu_time_ms,
+            });
+        }
+        self.status[i] = Some((m.pid, m.lost_messages.max(lost_before), at));
+    }
+}
+
+/// `CLOCK_MONOTONIC` now (re-exported for the soak's own timeline).
+pub fn now_ns() -> u64 {
+    monotonic_ns()
+}

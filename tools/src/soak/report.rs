@@ -1,0 +1,782 @@
+//! The soak report: the fault timeline (detect / recover per injected kill, kill
+//! windows), lost messages inside and outside them, latches, jumps, resources with
+//! their growth per hour, the pipeline against the timer floor, and the verdict; as
+//! JSON and markdown. Analysis only (no I/O besides [`Report::write`]).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Context as _;
+use serde::{Deserialize, Serialize};
+
+use super::continuity::Jump;
+use super::observer::{Edge, EdgeKind, Loss, Observed, ResourceSample};
+use crate::supervisor::summary::{Percentiles, Summary};
+
+/// After a fault has recovered, lost messages are still attributed to it for this long
+/// (statuses arrive at ~10 Hz and count a gap when the next message comes).
+pub const WINDOW_MARGIN_NS: u64 = 1_000_000_000;
+/// A fault not recovered within this time counts as unrecovered.
+pub const RECOVER_TIMEOUT_NS: u64 = 60_000_000_000;
+
+/// One injected kill, as the soak did it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Kill {
+    pub role: String,
+    pub pid: u32,
+    pub stamp_ns: u64,
+}
+
+/// One injected fault and what the pipeline did about it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FaultRecord {
+    pub role: String,
+    pub pid: u32,
+    /// Since the start of the soak.
+    pub at_s: f64,
+    /// Kill → first stale/fault flag on a stream.
+    pub detect_ms: Option<f64>,
+    /// What was seen first.
+    pub detected_by: Option<String>,
+    /// Kill → the actuator follows fresh torques again and the planner no longer holds.
+    pub recover_ms: Option<f64>,
+    pub recovered: bool,
+}
+
+/// min / p50 / max of a list of times.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+pub struct Spread {
+    pub count: usize,
+    pub min: f64,
+    pub p50: f64,
+    pub max: f64,
+}
+
+impl Spread {
+    fn of(mut v: Vec<f64>) -> Self {
+        if v.is_empty() {
+            return Self::default();
+        }
+        v.sort_by(f64::total_cmp);
+        Self {
+            count: v.len(),
+            min: v[0],
+            p50: v[v.len() / 2],
+            max: v[v.len() - 1],
+        }
+    }
+}
+
+/// A jump as listed in the report.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct JumpEvent {
+    pub at_s: f64,
+    #[serde(flatten)]
+    pub jump: Jump,
+    pub in_kill_window: bool,
+}
+
+/// Resources of one service over the run.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Resources {
+    pub processes: usize,
+    pub rss_max_kib: u64,
+    /// Linear fit of RSS over time after warm-up, pooled over the service's processes.
+    pub rss_growth_kib_per_h: Option<f64>,
+    /// Mean CPU over the run, % of one core (pooled slope of cpu_time).
+    pub cpu_pct_of_one_core: Option<f64>,
+    /// (t s, pid, RSS KiB, CPU % of one core since the previous row of the same pid).
+    pub table: Vec<(f64, u32, u64, Option<f64>)>,
+}
+
+/// The timer floor measured alongside.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Floor {
+    pub ticks: u64,
+    pub lateness_us: Percentiles,
+    pub deadline_misses: u64,
+}
+
+/// Pass/fail and why.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Verdict {
+    pub pass: bool,
+    pub faults_injected: usize,
+    pub faults_recovered: usize,
+    pub unrecovered_faults: usize,
+    pub jumps: u64,
+    pub lost_outside_kill_windows: u64,
+    pub lost_setpoints_outside_kill_windows: u64,
+    pub latches_without_fault: usize,
+    pub pipeline_exit_code: u8,
+    pub reasons: Vec<String>,
+}
+
+/// Everything the soak reports.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Report {
+    pub command: String,
+    pub started_utc: String,
+    pub duration_s: f64,
+    pub rate_hz: f64,
+    pub kill_every_s: Option<f64>,
+    pub random_commands: bool,
+    pub cpu_load_threads: usize,
+    pub seed: u64,
+    pub load_average_start: String,
+    pub load_average_end: String,
+    /// How the continuity thresholds are derived (see `soak::continuity`).
+    pub thresholds: BTreeMap<String, String>,
+    pub verdict: Verdict,
+    pub e2e_latency_us: Percentiles,
+    pub planner_lateness_us: Percentiles,
+    pub deadline_misses: u64,
+    pub floor: Option<Floor>,
+    /// Planner lateness p99 / floor lateness p99.
+    pub lateness_p99_vs_floor: Option<f64>,
+    pub lost_inside_kill_windows: u64,
+    pub lost_outside_kill_windows: u64,
+    /// Their `stamp_ns` is relative to the start of the soak.
+    pub losses_outside_kill_windows: Vec<Loss>,
+    /// Messages the soak's own observer missed (not the pipeline's), per stream.
+    pub observer_gaps: BTreeMap<String, u64>,
+    pub messages_observed: BTreeMap<String, u64>,
+    pub faults: Vec<FaultRecord>,
+    pub detect_ms: Spread,
+    pub recover_ms: Spread,
+    pub latches: usize,
+    pub latches_with_fault: usize,
+    pub latches_without_fault_at_s: Vec<f64>,
+    pub jumps_total: u64,
+    pub jumps: Vec<JumpEvent>,
+    pub commands: BTreeMap<String, u64>,
+    pub resources: BTreeMap<String, Resources>,
+    /// `microrobot run`'s summary of the same run.
+    pub pipeline: Summary,
+}
+
+/// Inputs of [`Report::build`] besides what was observed.
+pub struct Facts {
+    pub command: String,
+    pub started_utc: String,
+    pub duration_s: f64,
+    pub rate_hz: f64,
+    pub kill_every_s: Option<f64>,
+    pub random_commands: bool,
+    pub cpu_load_threads: usize,
+    pub seed: u64,
+    pub load_average_start: String,
+    pub load_average_end: String,
+    pub thresholds: BTreeMap<String, String>,
+    pub t0_ns: u64,
+    pub end_ns: u64,
+    pub kills: Vec<Kill>,
+    pub floor: Option<Floor>,
+    pub commands: BTreeMap<String, u64>,
+    pub exit_code: u8,
+}
+
+fn is_detection(k: EdgeKind) -> bool {
+    matches!(
+        k,
+        EdgeKind::StateUnhealthy | EdgeKind::TorqueStale | EdgeKind::SetpointHold | EdgeKind::Latch
+    )
+}
+
+/// The health after each edge: (stamp, kind, all well: the actuator follows fresh
+/// torques, dynamics has fresh state, the planner does not mirror a held arm).
+fn timeline(edges: &[Edge]) -> Vec<(u64, EdgeKind, bool)> {
+    let mut sorted = edges.to_vec();
+    sorted.sort_by_key(|e| e.stamp_ns);
+    let (mut healthy, mut hold, mut stale) = (false, false, false);
+    sorted
+        .iter()
+        .map(|e| {
+            match e.kind {
+                EdgeKind::StateHealthy => healthy = true,
+                EdgeKind::StateUnhealthy | EdgeKind::Latch => healthy = false,
+                EdgeKind::SetpointHold => hold = true,
+                EdgeKind::SetpointFree => hold = false,
+                EdgeKind::TorqueStale => stale = true,
+                EdgeKind::TorqueFresh => stale = false,
+                _ => {}
+            }
+            (e.stamp_ns, e.kind, healthy && !hold && !stale)
+        })
+        .collect()
+}
+
+/// The edge that shows the restarted process of `role` publishing.
+fn new_publisher(role: &str) -> Option<EdgeKind> {
+    match role {
+        "planner" => Some(EdgeKind::NewSetpointPublisher),
+        "dynamics" => Some(EdgeKind::NewTorquePublisher),
+        "actuator" => Some(EdgeKind::NewStatePublisher),
+        _ => None,
+    }
+}
+
+/// Detect and recover times of every kill; the kill windows `[kill, recovered + margin]`.
+pub fn analyse_faults(
+    kills: &[Kill],
+    edges: &[Edge],
+    t0_ns: u64,
+    end_ns: u64,
+) -> (Vec<FaultRecord>, Vec<(u64, u64)>) {
+    let tl = timeline(edges);
+    let mut records = Vec::new();
+    let mut windows = Vec::new();
+    for (n, k) in kills.iter().enumerate() {
+        let until = kills
+            .get(n + 1)
+            .map_or(end_ns, |next| next.stamp_ns)
+            .min(k.stamp_ns + RECOVER_TIMEOUT_NS);
+        let after: Vec<_> = tl
+            .iter()
+            .filter(|e| e.0 > k.stamp_ns && e.0 <= until)
+            .collect();
+        let detect = after.iter().find(|e| is_detection(e.1));
+        // Recovered: the restarted process publishes, and from then on (at the first
+        // moment) everything is well again.
+        let restarted = new_publisher(&k.role)
+            .and_then(|kind| after.iter().find(|e| e.1 == kind))
+            .map(|e| e.0);
+        let recover = match (detect, restarted) {
+            (Some(d), Some(r)) => {
+                let from = d.0.max(r);
+                let well_at = tl.iter().rev().find(|e| e.0 <= from).is_some_and(|e| e.2);
+                if well_at {
+                    Some(from)
+                } else {
+                    after.iter().find(|e| e.0 > from && e.2).map(|e| e.0)
+                }
+            }
+            (Some(_), None) => None,
+            // Nothing flagged: recovered if well when the next kill (or the end) came.
+            (None, _) => {
+                let last = tl.iter().rev().find(|e| e.0 <= until);
+                last.filter(|e| e.2).map(|_| k.stamp_ns)
+            }
+        };
+        let ms = |t: u64| t.saturating_sub(k.stamp_ns) as f64 * 1e-6;
+        records.push(FaultRecord {
+            role: k.role.clone(),
+            pid: k.pid,
+            at_s: k.stamp_ns.saturating_sub(t0_ns) as f64 * 1e-9,
+            detect_ms: detect.map(|d| ms(d.0)),
+            detected_by: detect.map(|d| format!("{:?}", d.1)),
+            recover_ms: recover.filter(|_| detect.is_some()).map(ms),
+            recovered: recover.is_some(),
+        });
+        windows.push((k.stamp_ns, recover.map_or(until, |r| r + WINDOW_MARGIN_NS)));
+    }
+    (records, windows)
+}
+
+fn in_windows(t: u64, windows: &[(u64, u64)]) -> bool {
+    windows.iter().any(|(a, b)| t >= *a && t <= *b)
+}
+
+/// Pooled within-process least-squares slope of `y` over `t` (s), skipping each
+/// process's first `warmup_s`: one slope shared by all processes of a service (a
+/// restart resets RSS and CPU time, a pooled fit ignores those steps).
+pub fn pooled_slope(samples: &[(u32, f64, f64)], warmup_s: f64) -> Option<f64> {
+    let mut groups: BTreeMap<u32, Vec<(f64, f64)>> = BTreeMap::new();
+    for &(pid, t, y) in samples {
+        groups.entry(pid).or_default().push((t, y));
+    }
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for pts in groups.values() {
+        let t_first = pts.first()?.0;
+        let kept: Vec<_> = pts.iter().filter(|p| p.0 - t_first >= warmup_s).collect();
+        if kept.len() < 2 {
+            continue;
+        }
+        let n = kept.len() as f64;
+        let tm = kept.iter().map(|p| p.0).sum::<f64>() / n;
+        let ym = kept.iter().map(|p| p.1).sum::<f64>() / n;
+        for p in &kept {
+            sxy += (p.0 - tm) * (p.1 - ym);
+            sxx += (p.0 - tm) * (p.0 - tm);
+        }
+    }
+    (sxx > 0.0).then(|| sxy / sxx)
+}
+
+fn resources(samples: &[ResourceSample], t0_ns: u64, duration_s: f64) -> Resources {
+    let t = |s: &ResourceSample| s.stamp_ns.saturating_sub(t0_ns) as f64 * 1e-9;
+    let warmup = (0.25 * duration_s).min(60.0);
+    let rss: Vec<_> = samples
+        .iter()
+        .map(|s| (s.pid, t(s), s.rss_kib as f64))
+        .collect();
+    let cpu: Vec<_> = samples
+        .iter()
+        .map(|s| (s.pid, t(s), s.cpu_time_ms as f64))
+        .collect();
+    let mut pids: Vec<u32> = samples.iter().map(|s| s.pid).collect();
+    pids.dedup();
+    let mut pid_set = pids.clone();
+    pid_set.sort_unstable();
+    pid_set.dedup();
+    // About 12 rows over the run.
+    let step = (duration_s / 12.0).max(5.0);
+    let mut table = Vec::new();
+    let mut next = 0.0;
+    let mut prev: Option<&ResourceSample> = None;
+    for s in samples {
+        if t(s) + 1e-9 < next && !std::ptr::eq(s, samples.last().unwrap_or(s)) {
+            continue;
+        }
+        next = t(s) + step;
+        let cpu_pct = prev
+            .filter(|p| p.pid == s.pid && s.stamp_ns > p.stamp_ns)
+            .map(|p| {
+                (s.cpu_time_ms as f64 - p.cpu_time_ms as f64)
+                    / ((s.stamp_ns - p.stamp_ns) as f64 * 1e-9)
+                    / 10.0
+            });
+        table.push((t(s), s.pid, s.rss_kib, cpu_pct));
+        prev = Some(s);
+    }
+    Resources {
+        processes: pid_set.len(),
+        rss_max_kib: samples.iter().map(|s| s.rss_kib).max().unwrap_or(0),
+        rss_growth_kib_per_h: pooled_slope(&rss, warmup).map(|s| s * 3600.0),
+        cpu_pct_of_one_core: pooled_slope(&cpu, 0.0).map(|s| s / 10.0),
+        table,
+    }
+}
+
+const STREAMS: [&str; 4] = ["setpoint", "torque", "state", "status"];
+const ROLES: [&str; 3] = ["planner", "dynamics", "actuator"];
+
+impl Report {
+    /// Builds the report from what the observer saw and the run's summary.
+    pub fn build(facts: Facts, obs: Observed, pipeline: Summary) -> Self {
+        let (faults, windows) = analyse_faults(&facts.kills, &obs.edges, facts.t0_ns, facts.end_ns);
+        let at_s = |t: u64| t.saturating_sub(facts.t0_ns) as f64 * 1e-9;
+        let (mut lost_in, mut lost_out, mut lost_sp_out) = (0, 0, 0);
+        let mut losses_out = Vec::new();
+        for l in &obs.losses {
+            if in_windows(l.stamp_ns, &windows) {
+                lost_in += l.count;
+            } else {
+                lost_out += l.count;
+                // The dynamics service subscribes to setpoints (and states); the
+                // actuator to torques; the planner to states.
+                if l.role == "dynamics" {
+                    lost_sp_out += l.count;
+                }
+                // Listed with its time since the start of the soak.
+                let mut rel = l.clone();
+                rel.stamp_ns = l.stamp_ns.saturating_sub(facts.t0_ns);
+                losses_out.push(rel);
+            }
+        }
+        let latch_times: Vec<u64> = obs
+            .edges
+            .iter()
+            .filter(|e| e.kind == EdgeKind::Latch)
+            .map(|e| e.stamp_ns)
+            .collect();
+        let latches_without: Vec<f64> = latch_times
+            .iter()
+            .filter(|t| !in_windows(**t, &windows))
+            .map(|t| at_s(*t))
+            .collect();
+        let jumps_total = obs.jumps.len() as u64 + obs.jumps_not_listed;
+        let jumps: Vec<JumpEvent> = obs
+            .jumps
+            .iter()
+            .map(|j| JumpEvent {
+                at_s: at_s(j.stamp_ns),
+                jump: j.clone(),
+                in_kill_window: in_windows(j.stamp_ns, &windows),
+            })
+            .collect();
+        let floor = facts.floor.clone();
+        let ratio = floor
+            .as_ref()
+            .filter(|f| f.lateness_us.p99 > 0.0)
+            .map(|f| pipeline.planner_lateness_us.p99 / f.lateness_us.p99);
+        let mut res = BTreeMap::new();
+        for (i, name) in ROLES.iter().enumerate() {
+            res.insert(
+                name.to_string(),
+                resources(&obs.resources[i], facts.t0_ns, facts.duration_s),
+            );
+        }
+        let recovered = faults.iter().filter(|f| f.recovered).count();
+        let mut v = Verdict {
+            faults_injected: faults.len(),
+            faults_recovered: recovered,
+            unrecovered_faults: faults.len() - recovered,
+            jumps: jumps_total,
+            lost_outside_kill_windows: lost_out,
+            lost_setpoints_outside_kill_windows: lost_sp_out,
+            latches_without_fault: latches_without.len(),
+            pipeline_exit_code: facts.exit_code,
+            ..Default::default()
+        };
+        if v.unrecovered_faults > 0 {
+            v.reasons.push(format!(
+                "{} injected fault(s) not recovered",
+                v.unrecovered_faults
+            ));
+        }
+        if v.jumps > 0 {
+            v.reasons.push(format!("{} jump(s)", v.jumps));
+        }
+        if v.lost_outside_kill_windows > 0 {
+            v.reasons.push(format!(
+                "{} message(s) lost outside the kill windows",
+                v.lost_outside_kill_windows
+            ));
+        }
+        if v.latches_without_fault > 0 {
+            v.reasons.push(format!(
+                "{} safe-state latch(es) without an injected fault",
+                v.latches_without_fault
+            ));
+        }
+        if facts.exit_code != 0 {
+            v.reasons.push(format!(
+                "the pipeline ended with exit code {}",
+                facts.exit_code
+            ));
+        }
+        v.pass = v.reasons.is_empty();
+        Self {
+            command: facts.command,
+            started_utc: facts.started_utc,
+            duration_s: facts.duration_s,
+            rate_hz: facts.rate_hz,
+            kill_every_s: facts.kill_every_s,
+            random_commands: facts.random_commands,
+            cpu_load_threads: facts.cpu_load_threads,
+            seed: facts.seed,
+            load_average_start: facts.load_average_start,
+            load_average_end: facts.load_average_end,
+            thresholds: facts.thresholds,
+            verdict: v,
+            e2e_latency_us: pipeline.e2e_latency_us,
+            planner_lateness_us: pipeline.planner_lateness_us,
+            deadline_misses: pipeline.deadline_misses,
+            floor,
+            lateness_p99_vs_floor: ratio,
+            lost_inside_kill_windows: lost_in,
+            lost_outside_kill_windows: lost_out,
+            losses_outside_kill_windows: losses_out,
+            observer_gaps: STREAMS
+                .iter()
+                .zip(obs.observer_gaps)
+                .map(|(k, v)| (k.to_string(), v))
+                .collect(),
+            messages_observed: STREAMS
+                .iter()
+                .zip(obs.received)
+                .map(|(k, v)| (k.to_string(), v))
+                .collect(),
+            detect_ms: Spread::of(faults.iter().filter_map(|f| f.detect_ms).collect()),
+            recover_ms: Spread::of(faults.iter().filter_map(|f| f.recover_ms).collect()),
+            faults,
+            latches: latch_times.len(),
+            latches_with_fault: latch_times.len() - latches_without.len(),
+            latches_without_fault_at_s: latches_without,
+            jumps_total,
+            jumps,
+            commands: facts.commands,
+            resources: res,
+            pipeline,
+        }
+    }
+
+    /// Writes `report.json` and `report.md` into `dir`.
+    pub fn write(&self, dir: &Path) -> anyhow::Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        let json = serde_json::to_string_pretty(self).context("cannot serialise the report")?;
+        let p = dir.join("report.json");
+        std::fs::write(&p, json + "\n").with_context(|| format!("cannot write {}", p.display()))?;
+        let p = dir.join("report.md");
+        std::fs::write(&p, self.markdown("Soak report"))
+            .with_context(|| format!("cannot write {}", p.display()))?;
+        Ok(())
+    }
+
+    /// The report as markdown under the heading `title`.
+    pub fn markdown(&self, title: &str) -> String {
+        let mut s = String::new();
+        let p = |x: &Percentiles| {
+            format!(
+                "{:.1} | {:.1} | {:.1} | {:.1} | {:.1}",
+                x.p50, x.p99, x.p999, x.p9999, x.max
+            )
+        };
+        let v = &self.verdict;
+        let _ = writeln!(s, "# {title}\n");
+        let _ = writeln!(s, "Command (started {} UTC):\n", self.started_utc);
+        let _ = writeln!(s, "```\n{}\n```\n", self.command);
+        let _ = writeln!(
+            s,
+            "{:.0} s at {} Hz; kills every {}; random commands {}; CPU load threads {}; seed {}. \
+             Load average at start `{}`, at end `{}`.\n",
+            self.duration_s,
+            self.rate_hz,
+            self.kill_every_s
+                .map_or("never".to_string(), |k| format!("{k} s")),
+            if self.random_commands { "on" } else { "off" },
+            self.cpu_load_threads,
+            self.seed,
+            self.load_average_start,
+            self.load_average_end
+        );
+        let _ = writeln!(
+            s,
+            "**Verdict: {}**{}\n",
+            if v.pass { "PASS" } else { "FAIL" },
+            if v.reasons.is_empty() {
+                String::new()
+            } else {
+                format!(" — {}", v.reasons.join("; "))
+            }
+        );
+        let _ = writeln!(s, "| check | value |\n|---|---|");
+        let _ = writeln!(
+            s,
+            "| faults injected / recovered | {} / {} |",
+            v.faults_injected, v.faults_recovered
+        );
+        let _ = writeln!(s, "| jumps | {} |", v.jumps);
+        let _ = writeln!(
+            s,
+            "| lost messages outside / inside kill windows | {} / {} |",
+            self.lost_outside_kill_windows, self.lost_inside_kill_windows
+        );
+        let _ = writeln!(
+            s,
+            "| safe-state latches (with an injected fault / without) | {} ({} / {}) |",
+            self.latches, self.latches_with_fault, v.latches_without_fault
+        );
+        let _ = writeln!(
+            s,
+            "| time to detect, ms (min / p50 / max) | {:.1} / {:.1} / {:.1} |",
+            self.detect_ms.min, self.detect_ms.p50, self.detect_ms.max
+        );
+        let _ = writeln!(
+            s,
+            "| time to recover, ms (min / p50 / max) | {:.1} / {:.1} / {:.1} |\n",
+            self.recover_ms.min, self.recover_ms.p50, self.recover_ms.max
+        );
+        let _ = writeln!(s, "## Latency and lateness (µs)\n");
+        let _ = writeln!(
+            s,
+            "| | p50 | p99 | p99.9 | p99.99 | max | deadline misses |\n|---|---|---|---|---|---|---|"
+        );
+        let _ = writeln!(
+            s,
+            "| end-to-end (setpoint publish → torque at the actuator) | {} | |",
+            p(&self.e2e_latency_us)
+        );
+        let _ = writeln!(
+            s,
+            "| planner lateness (wake-up − ideal tick) | {} | {} |",
+            p(&self.planner_lateness_us),
+            self.deadline_misses
+        );
+        match &self.floor {
+            Some(f) => {
+                let _ = writeln!(
+                    s,
+                    "| bare timer loop (floor, same run) | {} | {} |\n",
+                    p(&f.lateness_us),
+                    f.deadline_misses
+                );
+                if let Some(r) = self.lateness_p99_vs_floor {
+                    let _ = writeln!(s, "Planner lateness p99 = {r:.2} × the floor's p99.\n");
+                }
+            }
+            None => {
+                let _ = writeln!(s, "\n(no floor: the probe did not finish)\n");
+            }
+        }
+        let _ = writeln!(
+            s,
+            "Percentiles of services that restarted are the largest of their processes' \
+             (each process reports its own histogram).\n"
+        );
+        let _ = writeln!(s, "## Faults\n");
+        if self.faults.is_empty() {
+            let _ = writeln!(s, "None injected.\n");
+        } else {
+            let _ = writeln!(
+                s,
+                "| # | t (s) | killed | detect (ms) | seen first | recover (ms) | recovered |\n|---|---|---|---|---|---|---|"
+            );
+            for (i, f) in self.faults.iter().enumerate() {
+                let o = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.1}"));
+                let _ = writeln!(
+                    s,
+                    "| {} | {:.1} | {} (pid {}) | {} | {} | {} | {} |",
+                    i + 1,
+                    f.at_s,
+                    f.role,
+                    f.pid,
+                    o(f.detect_ms),
+                    f.detected_by.as_deref().unwrap_or("-"),
+                    o(f.recover_ms),
+                    if f.recovered { "yes" } else { "NO" }
+                );
+            }
+            let _ = writeln!(
+                s,
+                "\nDetect: the first stale/fault flag on a stream after the kill. Recover: the \
+                 actuator follows fresh torque commands again and the planner no longer mirrors \
+                 the held arm (the soak sends the Reset a latched actuator needs).\n"
+            );
+        }
+        let _ = writeln!(s, "## Jumps ({})\n", self.jumps_total);
+        for (k, v) in &self.thresholds {
+            let _ = writeln!(s, "- {k}: {v}");
+        }
+        let _ = writeln!(s);
+        if !self.jumps.is_empty() {
+            let _ = writeln!(
+                s,
+                "| t (s) | stream | field | joint | size | bound | pair | in kill window |\n|---|---|---|---|---|---|---|---|"
+            );
+            for j in self.jumps.iter().take(50) {
+                let _ = writeln!(
+                    s,
+                    "| {:.3} | {} | {} | {} | {:.3e} | {:.3e} | {} | {} |",
+                    j.at_s,
+                    j.jump.stream,
+                    j.jump.field,
+                    j.jump.joint,
+                    j.jump.size,
+                    j.jump.bound,
+                    j.jump.context,
+                    j.in_kill_window
+                );
+            }
+            if self.jumps.len() > 50 {
+                let _ = writeln!(s, "\n({} more in report.json)", self.jumps.len() - 50);
+            }
+            let _ = writeln!(s);
+        }
+        let _ = writeln!(s, "## Lost messages\n");
+        let _ = writeln!(
+            s,
+            "Sequence gaps counted by the services: {} inside kill windows, {} outside. \
+             The soak's own observer missed {:?} (its queue, not the pipeline).\n",
+            self.lost_inside_kill_windows, self.lost_outside_kill_windows, self.observer_gaps
+        );
+        for l in self.losses_outside_kill_windows.iter().take(20) {
+            let _ = writeln!(
+                s,
+                "- {} lost {} at {:.1} s",
+                l.role,
+                l.count,
+                l.stamp_ns as f64 * 1e-9
+            );
+        }
+        let _ = writeln!(s, "## Resources\n");
+        let _ = writeln!(
+            s,
+            "| service | processes | RSS max (KiB) | RSS growth (KiB/h, after warm-up) | CPU (% of one core) |\n|---|---|---|---|---|"
+        );
+        for (name, r) in &self.resources {
+            let _ = writeln!(
+                s,
+                "| {name} | {} | {} | {} | {} |",
+                r.processes,
+                r.rss_max_kib,
+                r.rss_growth_kib_per_h
+                    .map_or("-".to_string(), |g| format!("{g:+.1}")),
+                r.cpu_pct_of_one_core
+                    .map_or("-".to_string(), |c| format!("{c:.2}"))
+            );
+        }
+        let _ = writeln!(s);
+        for (name, r) in &self.resources {
+            let _ = writeln!(
+                s,
+                "{name} over time:\n\n| t (s) | pid | RSS (KiB) | CPU % since the previous row |\n|---|---|---|---|"
+            );
+            for (t, pid, rss, cpu) in &r.table {
+                let _ = writeln!(
+                    s,
+                    "| {t:.0} | {pid} | {rss} | {} |",
+                    cpu.map_or("-".to_string(), |c| format!("{c:.2}"))
+                );
+            }
+            let _ = writeln!(s);
+        }
+        let _ = writeln!(
+            s,
+            "Commands: {:?}. Messages observed: {:?}.",
+            self.commands, self.messages_observed
+        );
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn e(ms: u64, kind: EdgeKind) -> Edge {
+        Edge {
+            stamp_ns: ms * 1_000_000,
+            kind,
+        }
+    }
+
+    #[test]
+    fn a_kill_is_detected_at_the_first_flag_and_recovered_when_healthy_and_free() {
+        let edges = vec![
+            e(10, EdgeKind::StateHealthy),
+            e(1050, EdgeKind::StateUnhealthy),
+            e(1150, EdgeKind::NewTorquePublisher),
+            e(1200, EdgeKind::Latch),
+            e(1210, EdgeKind::SetpointHold),
+            e(1500, EdgeKind::StateHealthy),
+            e(1501, EdgeKind::SetpointFree),
+        ];
+        let kills = vec![Kill {
+            role: "dynamics".into(),
+            pid: 7,
+            stamp_ns: 1_000_000_000,
+        }];
+        let (f, w) = analyse_faults(&kills, &edges, 0, 10_000_000_000);
+        assert_eq!(f.len(), 1);
+        assert!((f[0].detect_ms.unwrap() - 50.0).abs() < 1e-9);
+        assert!(
+            (f[0].recover_ms.unwrap() - 501.0).abs() < 1e-9,
+            "{:?}",
+            f[0]
+        );
+        assert!(f[0].recovered);
+        assert_eq!(w[0], (1_000_000_000, 1_501_000_000 + WINDOW_MARGIN_NS));
+        // Without the final edges it never recovers, and the window runs to the end.
+        let (f, w) = analyse_faults(&kills, &edges[..5], 0, 10_000_000_000);
+        assert!(!f[0].recovered);
+        assert_eq!(w[0].1, 10_000_000_000);
+    }
+
+    #[test]
+    fn the_pooled_slope_ignores_restart_steps() {
+        // Two processes, each growing 1 per s, the second starting lower.
+        let mut s = Vec::new();
+        for k in 0..10 {
+            s.push((1, k as f64, 100.0 + k as f64));
+            s.push((2, 20.0 + k as f64, 10.0 + k as f64));
+        }
+        let slope = pooled_slope(&s, 0.0).unwrap();
+        assert!((slope - 1.0).abs() < 1e-12, "{slope}");
+        // A flat one is flat.
+        let flat: Vec<_> = (0..10).map(|k| (1, k as f64, 5.0)).collect();
+        assert_eq!(pooled_slope(&flat, 0.0), Some(0.0));
+    }
+}
