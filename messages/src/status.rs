@@ -139,8 +139,12 @@ impl RefusalReason {
             Self::CannotPlan => "no trajectory within the limits",
             Self::NotStarted => "the measured state is not known yet",
             Self::OutOfOrder => "sequence number out of order or duplicated",
-            Self::TeleopUnavailable => "teleop is not available (no [teleop] config or master input)",
-            Self::TeleopNotAtRest => "teleop is entered at rest only; stop the running motion first",
+            Self::TeleopUnavailable => {
+                "teleop is not available (no [teleop] config or master input)"
+            }
+            Self::TeleopNotAtRest => {
+                "teleop is entered at rest only; stop the running motion first"
+            }
         }
     }
 }

@@ -10,8 +10,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, replay};
 use microrobot_cli::{
-    eval_model, eval_trajectory, run, send, service, soak, study, teleop_report, teleop_source,
-    top,
+    eval_model, eval_trajectory, run, send, service, soak, study, teleop_report, teleop_source, top,
 };
 
 #[derive(Parser)]

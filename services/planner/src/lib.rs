@@ -31,9 +31,8 @@ pub mod teleop;
 use iceoryx2::prelude::*;
 use microrobot_messages::{
     CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState, MAX_JOINTS,
-    MasterPose, MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole,
-    ServiceStatus, TargetSpace, monotonic_ns, open_event, open_publish_subscribe, setpoint_flags,
-    state_flags,
+    MasterPose, MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole, ServiceStatus,
+    TargetSpace, monotonic_ns, open_event, open_publish_subscribe, setpoint_flags, state_flags,
 };
 use microrobot_model::ik::{IkOptions, IkTarget};
 use microrobot_model::{ModelData, Robot};
