@@ -253,10 +253,17 @@ pub fn analyse(
     r.tracking_error_um = percentiles(track);
 
     // The longest engaged stretch of valid master samples.
-    let valid = |m: &MasterPose| m.clutch == 1 && m.is_valid();
+    // A gap of more than 100 ms (a device restart, the history sample of an earlier
+    // run) ends a stretch, as the planner's master timeout would.
+    let valid = |i: usize| {
+        let m = &master[i];
+        m.clutch == 1
+            && m.is_valid()
+            && (i == 0 || m.stamp_ns.saturating_sub(master[i - 1].stamp_ns) <= 100_000_000)
+    };
     let (mut best, mut run_start) = ((0usize, 0usize), None);
-    for (i, m) in master.iter().enumerate() {
-        match (valid(m), run_start) {
+    for i in 0..master.len() {
+        match (valid(i), run_start) {
             (true, None) => run_start = Some(i),
             (false, Some(s)) => {
                 if i - s > best.1 - best.0 {
