@@ -3,7 +3,9 @@
 //!
 //! * Clock: its own timerfd at `rate_hz` on absolute deadlines (default), or, in
 //!   lockstep, one tick per measured-state message from the actuator.
-//! * Start: from the actuator's measured state (history 1 on State), at rest.
+//! * Start: from the actuator's measured state (history 1 on State): at rest, or, when a
+//!   restarted planner finds the arm moving, a jerk-limited stop from its measured q and
+//!   q̇ (the program is not run); mirroring it when the actuator is in its safe state.
 //! * Motion: the config's program (if any), then run-time [`MotionCommand`]s: Move
 //!   (joint or Cartesian target, soft/cubic/quintic/LSPB), Stop (shortest jerk-limited
 //!   stop), EStop (the same at the e-stop limits, then refuse motion until Reset), Reset.
@@ -150,6 +152,10 @@ pub struct Counters {
     pub stale_cycles: u64,
     pub estops: u64,
 }
+
+/// Measured speed (rad/s or m/s) below which a (re)starting planner takes the arm as
+/// at rest (the actuator's own rest threshold; sensor noise stays below it).
+const START_REST_QD: f64 = 1e-3;
 
 /// The planner's logic, independent of IPC and clocks.
 pub struct PlannerCore {
@@ -305,17 +311,56 @@ impl PlannerCore {
             return false;
         }
         self.last_state = Some(*s);
+        if self.started && self.counters.ticks == 0 && self.mode == Mode::Stopping {
+            // Started on a moving arm and not ticked yet: stop from the newest measured
+            // state (the actuator's own hold changes it meanwhile).
+            if let Some(m) = self.measured_sample() {
+                let prev = self.current;
+                self.current = Sample {
+                    q: m.q,
+                    qd: m.qd,
+                    ..Default::default()
+                };
+                if self.brake(false).is_err() {
+                    self.current = prev;
+                }
+            }
+        }
         if !self.started {
             self.started = true;
-            let mut q = JointVector::zeros();
-            for i in 0..self.dof {
-                q[i] = self.robot.joints()[i].limits.clamp(s.q[i]);
-            }
+            // Start from the measured state, velocity included: a restarted planner can
+            // find the arm still moving (held or damped by the actuator), and a
+            // setpoint at rest there would be a velocity jump.
+            let Some(m) = self.measured_sample() else {
+                return true;
+            };
+            // At rest below START_REST_QD (sensor noise): start exactly at rest.
+            let moving = (0..self.dof).any(|i| m.qd[i].abs() > START_REST_QD);
             self.current = Sample {
-                q,
+                q: m.q,
+                qd: if moving { m.qd } else { JointVector::zeros() },
                 ..Default::default()
             };
-            if self.teleop_at_start {
+            let safe = s.flags & state_flags::SAFE_STATE != 0
+                || s.lifecycle == LifecycleState::Fault as u32;
+            if safe {
+                // The actuator is latched: mirror the measured arm from the first tick
+                // (as `check_state` would from the next one).
+                if self.program.take().is_some() {
+                    tracing::warn!(
+                        "planner: the actuator is in its safe state: the program is not run"
+                    );
+                }
+                self.mode = Mode::SafeHold;
+            } else if moving {
+                // Bring the arm to rest from where it is (jerk-limited, bumpless).
+                if self.program.take().is_some() {
+                    tracing::warn!("planner: the arm is moving at start: the program is not run");
+                }
+                if self.brake(false).is_err() {
+                    self.current.qd = JointVector::zeros();
+                }
+            } else if self.teleop_at_start {
                 if self.program.take().is_some() {
                     tracing::warn!("planner: teleop.enabled: the program is not run");
                 }

@@ -219,3 +219,43 @@ fn a_reset_in_the_safe_state_resumes_when_the_actuator_does() {
     assert_ne!(p.mode(), Mode::SafeHold);
     assert!(p.on_command(&mv(T, ProfileKind::Soft, 0.0), 0).is_ok());
 }
+
+/// A restarted planner that finds the arm moving starts from its measured velocity (a
+/// jerk-limited stop from there), not at rest: no velocity jump in the setpoint stream.
+/// Finding the actuator in its safe state, it mirrors the arm from the first tick.
+#[test]
+fn a_planner_starting_on_a_moving_arm_continues_from_its_measured_velocity() {
+    let cfg = PipelineConfig {
+        robot: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml"),
+        ..Default::default()
+    };
+    let robot = Robot::from_file(&cfg.robot).unwrap();
+    let mut moving = JointState {
+        dof: 6,
+        header: microrobot_messages::Header {
+            seq: 1,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    moving.q[0] = 0.2;
+    moving.qd[0] = 0.3;
+    let mut p = PlannerCore::new(&robot, &cfg, None);
+    assert!(p.accept_state(&moving, 1));
+    let sp = p.tick(0);
+    let amax = robot.joints()[0].limits.acceleration;
+    assert!((sp.qd[0] - 0.3).abs() <= amax * 1e-3 * 1.01, "{sp:?}");
+    assert!((sp.q[0] - 0.2).abs() <= 0.3 * 1e-3 * 1.01, "{sp:?}");
+    assert_eq!(p.mode(), Mode::Stopping);
+
+    moving.flags = microrobot_messages::state_flags::SAFE_STATE;
+    let mut p = PlannerCore::new(&robot, &cfg, None);
+    assert!(p.accept_state(&moving, 1));
+    let sp = p.tick(0);
+    assert_eq!(p.mode(), Mode::SafeHold);
+    assert_ne!(
+        sp.flags & microrobot_messages::setpoint_flags::HOLD_FOR_SAFE_STATE,
+        0
+    );
+    assert_eq!(sp.qd[0], 0.3);
+}

@@ -9,16 +9,25 @@
 //!   and are not checked as the later message of a pair; the first setpoint after the
 //!   hold is (it must start from the mirrored state).
 //! * a restarted planner's first setpoints must start from the measured arm:
-//!   |q − q_meas| ≤ vmax·(age+dt)·(1+tol) + ε_q, |q̇ − q̇_meas| ≤ amax·(age+dt)·(1+tol) + ε_q̇.
+//!   |q − q_meas| ≤ vmax·(age+dt)·(1+tol) + ε_q,
+//!   |q̇ − q̇_meas| ≤ max(amax, |q̈_meas|)·(age+dt)·(1+tol) + ε_q̇, with q̈_meas the arm's
+//!   acceleration between the last two measured states (held by the actuator's own law
+//!   it may decelerate faster than amax while the state ages).
 //! * torque (commanded and applied): |Δτ| ≤ τmax·dt/T_SLEW·(1+tol): a full-scale change
 //!   takes at least [`T_SLEW_S`]. The actuator blends every switch of its own over
 //!   `ramp_ms` (20 ms by default) and the plan is jerk-limited, so an honest stream
-//!   changes at least 2× slower than this bound.
+//!   changes at least 2× slower than this bound. Commanded torque is judged only while
+//!   the actuator follows it (not latched, not holding on its own) and not across a
+//!   switch of dynamics between feedback and feed-forward (its measured state missing
+//!   for `stale_ms`: a dead or stalled actuator); there the applied torque, always
+//!   judged, is what reaches the arm.
 //! * measured state: within one actuator process the plant integrates,
 //!   |Δq − (q̇₀+q̇₁)/2·dt| ≤ ε_state (the trapezoid rule; its error amax·dt²/12 is far below
 //!   ε_state); across an actuator restart the new process must resume exactly where the
 //!   old one was: |Δq| ≤ ε_resume and |Δq̇| ≤ ε_resume (the simulated arm is frozen while
-//!   its driver is down; a real arm would be held by its brakes).
+//!   its driver is down; a real arm would be held by its brakes). The shutdown state of
+//!   a clean stop (backend inactive, brakes on: q̇ = 0, no torque) follows no plant step:
+//!   only |Δq| ≤ ε_resume is checked there.
 
 use microrobot_messages::{JointSetpoint, JointState, MAX_JOINTS, TorqueCommand, setpoint_flags};
 use microrobot_model::Robot;
@@ -126,10 +135,15 @@ pub fn setpoint_pair(b: &Bounds, prev: &JointSetpoint, next: &JointSetpoint, out
 }
 
 /// The first setpoint of a (re)started planner against the measured state `meas`,
-/// which is `age_s` older than the setpoint.
+/// which is `age_s` older than the setpoint, the arm accelerating at `meas_acc` (per
+/// joint, measured between the last two states). Over `age_s` the arm's velocity
+/// changes at its own acceleration, which while the actuator holds or damps on its own
+/// is set by its hold law, not by the planner's limits: the velocity bound uses the
+/// larger of the two.
 pub fn setpoint_start(
     b: &Bounds,
     meas: &JointState,
+    meas_acc: &[f64; MAX_JOINTS],
     age_s: f64,
     next: &JointSetpoint,
     out: &mut Vec<Jump>,
@@ -154,7 +168,7 @@ pub fn setpoint_start(
             "qd",
             i,
             dqd,
-            b.amax[i] * dt * k + EPS_QD + b.noise_qd,
+            b.amax[i].max(meas_acc.get(i).map_or(0.0, |a| a.abs())) * dt * k + EPS_QD + b.noise_qd,
         );
     }
 }
@@ -201,6 +215,22 @@ pub fn state_pair(
             let dev = (next.q[i] - prev.q[i] - expected).abs();
             push(out, &plant, "q", i, dev, EPS_STATE + b.noise_q);
         }
+    }
+}
+
+/// The actuator's shutdown state (its backend deactivated at a clean stop: drives
+/// disabled, brakes on, so q̇ = 0 and no torque applied) against its last plant step. No
+/// plant step lies between the two, so neither the integration nor the torque slew
+/// applies; the arm must simply stay where it was: |Δq| ≤ ε_resume.
+pub fn state_shutdown(b: &Bounds, prev: &JointState, next: &JointState, out: &mut Vec<Jump>) {
+    let at = Site(
+        next.header.stamp_ns,
+        "state",
+        "shutdown state (backend inactive) vs the last plant step",
+    );
+    for i in 0..b.dof {
+        let dq = (next.q[i] - prev.q[i]).abs();
+        push(out, &at, "q", i, dq, EPS_RESUME + b.noise_q);
     }
 }
 
@@ -318,6 +348,16 @@ mod tests {
         state_resume(&b, &a, &a, &mut out);
         assert!(out.is_empty());
         state_resume(&b, &a, &c, &mut out);
+        assert_eq!(out.len(), 1, "{out:?}");
+        out.clear();
+        // The shutdown state: the brakes stop the arm where it is (q̇ = 0, no torque).
+        let mut braked = a;
+        braked.qd[0] = 0.0;
+        braked.tau_applied[0] = 0.0;
+        state_shutdown(&b, &a, &braked, &mut out);
+        assert!(out.is_empty(), "{out:?}");
+        braked.q[0] += 1e-3;
+        state_shutdown(&b, &a, &braked, &mut out);
         assert_eq!(out.len(), 1, "{out:?}");
     }
 }

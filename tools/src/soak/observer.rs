@@ -13,7 +13,7 @@ use std::time::Duration;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use microrobot_messages::{
-    JointSetpoint, JointState, LifecycleState, ServiceKind, ServiceRole, ServiceStatus,
+    JointSetpoint, JointState, LifecycleState, MAX_JOINTS, ServiceKind, ServiceRole, ServiceStatus,
     TorqueCommand, monotonic_ns, open_publish_subscribe, setpoint_flags, state_flags, torque_flags,
 };
 use serde::{Deserialize, Serialize};
@@ -230,6 +230,8 @@ pub struct Checker {
     torque: Option<Last<TorqueCommand>>,
     torque_stale: bool,
     state: Option<Last<JointState>>,
+    /// The arm's measured acceleration between the last two states of one process.
+    state_acc: [f64; MAX_JOINTS],
     /// The predecessor's last state, until the restarted actuator's first plant step.
     resumed_from: Option<JointState>,
     state_healthy: Option<bool>,
@@ -255,6 +257,7 @@ impl Checker {
             torque: None,
             torque_stale: false,
             state: None,
+            state_acc: [0.0; MAX_JOINTS],
             resumed_from: None,
             state_healthy: None,
             state_safe: false,
@@ -340,7 +343,7 @@ impl Checker {
         self.planner_started = false;
         if let Some(s) = &self.state {
             let age = m.header.stamp_ns.saturating_sub(s.msg.header.stamp_ns) as f64 * 1e-9;
-            continuity::setpoint_start(&self.bounds, &s.msg, age, m, found);
+            continuity::setpoint_start(&self.bounds, &s.msg, &self.state_acc, age, m, found);
         }
     }
 
@@ -351,7 +354,17 @@ impl Checker {
             Some(last) if last.publisher == publisher => {
                 let gap = m.header.seq.saturating_sub(last.msg.header.seq + 1);
                 self.out.observer_gaps[1] += gap;
-                continuity::torque_pair(&self.bounds, &last.msg, m, &mut found);
+                // A command reaches the arm unblended only while the actuator follows
+                // commands. Latched or holding on its own, it ignores them and blends
+                // over `ramp_ms` when it follows them again; and dynamics switches
+                // between feedback and feed-forward only when the measured state has
+                // been missing for `stale_ms` (a dead or stalled actuator). There the
+                // applied torque is what reaches the arm, and the state stream judges it.
+                let switch = (last.msg.flags ^ m.flags) & torque_flags::STATE_STALE != 0;
+                let followed = self.state_healthy != Some(false);
+                if followed && !switch {
+                    continuity::torque_pair(&self.bounds, &last.msg, m, &mut found);
+                }
             }
             Some(_) => self.edge(m.header.stamp_ns, EdgeKind::NewTorquePublisher),
             None => {}
@@ -377,6 +390,10 @@ impl Checker {
         match &self.state {
             Some(last) if last.publisher == publisher => {
                 let steps = m.header.seq.saturating_sub(last.msg.header.seq);
+                let dt = steps.max(1) as f64 * self.bounds.period_s;
+                for i in 0..self.bounds.dof {
+                    self.state_acc[i] = (m.qd[i] - last.msg.qd[i]) / dt;
+                }
                 self.out.observer_gaps[2] += steps.saturating_sub(1);
                 match self.resumed_from {
                     // The restarted actuator's first plant step: its applied torque
@@ -389,6 +406,13 @@ impl Checker {
                         continuity::state_pair(&self.bounds, &from, m, 1, &mut found);
                     }
                     Some(_) => self.resumed_from = None,
+                    // The shutdown state of a clean stop: the backend went inactive
+                    // (brakes on) without a plant step.
+                    None if m.lifecycle == LifecycleState::Inactive as u32
+                        && last.msg.lifecycle != LifecycleState::Inactive as u32 =>
+                    {
+                        continuity::state_shutdown(&self.bounds, &last.msg, m, &mut found)
+                    }
                     None => continuity::state_pair(&self.bounds, &last.msg, m, steps, &mut found),
                 }
             }
