@@ -175,15 +175,7 @@ fn every_bad_input_class_is_refused_named_counted_and_moves_nothing() {
     let inst = instance("bad-input");
     let cfg = write_config(dir.path(), &inst, "", "");
     let rec = Recorder::start(&inst);
-    let proc = start(&[
-        "run",
-        "--config",
-        cfg.to_str().expect("utf-8"),
-        "--no-program",
-        "--duration",
-        "120",
-    ]);
-    wait_ready(&inst, 60.0);
+    let proc = start_holding(&inst, &cfg, 120, None);
     let node = node();
     let mut statuses = Statuses::open(&node, &inst);
     let sp = Injector::<JointSetpoint>::open(&node, &inst, ServiceKind::Setpoint);

@@ -21,17 +21,7 @@ fn estop_mid_motion_stops_every_joint_on_the_shortest_jerk_limited_stop() {
     let cfg = write_config(dir.path(), &inst, "", "");
     let summary_path = dir.path().join("summary.json");
     let rec = Recorder::start(&inst);
-    let proc = start(&[
-        "run",
-        "--config",
-        cfg.to_str().expect("utf-8"),
-        "--no-program",
-        "--duration",
-        "90",
-        "--summary-json",
-        summary_path.to_str().expect("utf-8"),
-    ]);
-    wait_ready(&inst, 60.0);
+    let proc = start_holding(&inst, &cfg, 90, Some(&summary_path));
     let mv = send(
         &inst,
         &cfg,

@@ -54,17 +54,7 @@ fn kill_mid_motion(test: &str, victim: ServiceRole) -> Case {
     );
     let summary_path = dir.path().join("summary.json");
     let rec = Recorder::start(&inst);
-    let proc = start(&[
-        "run",
-        "--config",
-        cfg.to_str().expect("utf-8"),
-        "--no-program",
-        "--duration",
-        "90",
-        "--summary-json",
-        summary_path.to_str().expect("utf-8"),
-    ]);
-    wait_ready(&inst, 60.0);
+    let proc = start_holding(&inst, &cfg, 90, Some(&summary_path));
     let mv = send(
         &inst,
         &cfg,
@@ -396,15 +386,7 @@ fn a_killed_supervisor_stops_every_service_and_the_actuator_goes_safe() {
     let inst = instance("kill-supervisor");
     let cfg = write_config(dir.path(), &inst, "", "");
     let rec = Recorder::start(&inst);
-    let proc = start(&[
-        "run",
-        "--config",
-        cfg.to_str().expect("utf-8"),
-        "--no-program",
-        "--duration",
-        "120",
-    ]);
-    wait_ready(&inst, 60.0);
+    let proc = start_holding(&inst, &cfg, 120, None);
     let mv = send(
         &inst,
         &cfg,

@@ -81,17 +81,7 @@ fn saturated_cores_degrade_the_pipeline_visibly_but_never_make_it_jump() {
     let cfg = write_config(dir.path(), &inst, "", "");
     let summary_path = dir.path().join("summary.json");
     let rec = Recorder::start(&inst);
-    let proc = start(&[
-        "run",
-        "--config",
-        cfg.to_str().expect("utf-8"),
-        "--no-program",
-        "--duration",
-        "90",
-        "--summary-json",
-        summary_path.to_str().expect("utf-8"),
-    ]);
-    wait_ready(&inst, 60.0);
+    let proc = start_holding(&inst, &cfg, 90, Some(&summary_path));
     let targets = ["40,40,40,40,40,40", "5,5,5,5,5,5"];
     let mut moves = 0;
     let mut next_move = || {

@@ -68,16 +68,7 @@ fn a_paused_actuator_pauses_the_planner_and_the_timer_clock_does_not() {
             &format!("[planner]\nclock = \"{clock}\""),
         );
         let rec = Recorder::start_statuses(&inst);
-        let proc = start(&[
-            "run",
-            "--config",
-            cfg.to_str().expect("utf-8"),
-            "--no-program",
-            "--duration",
-            "6",
-            "--quiet",
-        ]);
-        wait_ready(&inst, 60.0);
+        let proc = start_holding(&inst, &cfg, 6, None);
         let t0 = Instant::now();
         let actuator = loop {
             std::thread::sleep(Duration::from_millis(200));

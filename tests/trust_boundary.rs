@@ -29,15 +29,7 @@ fn the_shared_memory_files_of_a_running_pipeline_are_owner_only() {
     let dir = tempfile::tempdir().expect("tempdir");
     let inst = instance("trust");
     let cfg = write_config(dir.path(), &inst, "", "");
-    let proc = start(&[
-        "run",
-        "--config",
-        cfg.to_str().expect("utf-8"),
-        "--no-program",
-        "--duration",
-        "60",
-    ]);
-    wait_ready(&inst, 60.0);
+    let proc = start_holding(&inst, &cfg, 60, None);
     // SAFETY: getuid has no preconditions.
     let uid = unsafe { libc::getuid() };
     let mut paths = Vec::new();

@@ -442,3 +442,26 @@ pub fn send(instance: &str, config: &Path, args: &[&str]) -> Finished {
     all.extend_from_slice(args);
     run(&all, 60.0)
 }
+
+/// Starts `microrobot run --config CFG --no-program --duration S [--summary-json FILE]`
+/// (a pipeline holding the arm, to be commanded by the test) and waits until every
+/// service of `instance` is ready.
+pub fn start_holding(instance: &str, cfg: &Path, duration_s: u32, summary: Option<&Path>) -> Proc {
+    let cfg_s = cfg.to_str().expect("utf-8 config path").to_string();
+    let dur = duration_s.to_string();
+    let mut args = vec![
+        "run",
+        "--config",
+        &cfg_s,
+        "--no-program",
+        "--duration",
+        &dur,
+    ];
+    let sum_s = summary.map(|p| p.to_str().expect("utf-8 summary path").to_string());
+    if let Some(s) = &sum_s {
+        args.extend_from_slice(&["--summary-json", s]);
+    }
+    let proc = start(&args);
+    wait_ready(instance, 60.0);
+    proc
+}
