@@ -75,7 +75,7 @@ fn estop_mid_motion_stops_every_joint_on_the_shortest_jerk_limited_stop() {
     let sp = &streams.setpoints;
 
     let lim = Limits::seed_arm();
-    let rep = setpoint_jumps(sp, &lim, PERIOD_S);
+    let rep = setpoint_jumps(sp, &streams.states, &lim, PERIOD_S);
     assert!(
         rep.jumps.is_empty(),
         "setpoint jumps:\n{}",

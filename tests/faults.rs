@@ -123,7 +123,7 @@ fn common_checks(c: &Case, victim: ServiceRole) {
         sp.len(),
         st.len()
     );
-    let rep = setpoint_jumps(sp, &lim, PERIOD_S);
+    let rep = setpoint_jumps(sp, st, &lim, PERIOD_S);
     assert!(
         rep.jumps.is_empty(),
         "setpoint jumps:\n{}",

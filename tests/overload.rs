@@ -127,7 +127,7 @@ fn saturated_cores_degrade_the_pipeline_visibly_but_never_make_it_jump() {
     let s = summary(&summary_path);
 
     let lim = Limits::seed_arm();
-    let rep = setpoint_jumps(&streams.setpoints, &lim, PERIOD_S);
+    let rep = setpoint_jumps(&streams.setpoints, &streams.states, &lim, PERIOD_S);
     assert!(
         rep.jumps.is_empty(),
         "setpoint jumps:\n{}",

@@ -100,6 +100,8 @@ pub mod torque_flags {
     pub const STATE_STALE: u32 = 1 << 1;
     /// Feedback (computed torque) was applied.
     pub const FEEDBACK: u32 = 1 << 2;
+    /// At least one joint's torque change was cut to the slew limit (`torque_slew_ms`).
+    pub const SLEW_LIMITED: u32 = 1 << 3;
 }
 
 /// Actuator → planner and dynamics: the measured joint state.
@@ -135,4 +137,6 @@ pub mod state_flags {
     pub const COMMAND_STALE: u32 = 1 << 1;
     /// A commanded torque was saturated by the backend.
     pub const SATURATED: u32 = 1 << 2;
+    /// The applied torque's change was cut by the actuator's torque slope.
+    pub const SLOPE_LIMITED: u32 = 1 << 3;
 }

@@ -49,6 +49,8 @@ pub struct Counters {
     pub stale_cycles: u64,
     /// Steps in which the backend saturated a torque.
     pub saturated_cycles: u64,
+    /// Steps whose torque change was cut by the torque slope (`torque_slope_ms`).
+    pub slope_limited_cycles: u64,
     /// Safe-state latches (and backend faults).
     pub faults: u64,
     /// Reset commands refused (e.g. commands not fresh yet).
@@ -91,6 +93,13 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         let period_s = 1.0 / cfg.rate_hz;
         let ramp_steps = (cfg.watchdog.ramp_ms * 1e-3 / period_s).ceil() as u32;
         let last_measured = backend.read()?;
+        let mut slope = JointVector::repeat(f64::INFINITY);
+        if cfg.actuator.torque_slope_ms > 0.0 {
+            let steps_per_full_scale = cfg.actuator.torque_slope_ms * 1e-3 / period_s;
+            for (i, j) in model.joints().iter().enumerate().take(slope.len()) {
+                slope[i] = j.limits.effort / steps_per_full_scale;
+            }
+        }
         Ok(Self {
             dof: backend.dof(),
             safety: Safety::new(
@@ -99,7 +108,8 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                 cfg.actuator.hold_kd_per_s,
                 cfg.watchdog.safe_state,
                 ramp_steps,
-            ),
+            )
+            .with_slope(&slope),
             backend,
             period_s,
             lockstep: cfg.lockstep,
@@ -173,8 +183,11 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                 self.latest = Some(*msg);
                 self.latest_unapplied = true;
                 self.watchdog.feed(now_ns);
-                if self.backend.lifecycle() == LifecycleState::Inactive && !self.safety.latched() {
-                    let _ = self.backend.activate();
+                if self.backend.lifecycle() == LifecycleState::Inactive
+                    && !self.safety.latched()
+                    && self.backend.activate().is_ok()
+                {
+                    self.safety.on_switch_on();
                 }
                 Ok(())
             }
@@ -275,6 +288,9 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             let q = self.last_measured.q;
             let qd = self.last_measured.qd;
             let tau = self.safety.torque(cmd_tau.as_ref(), &q, &qd);
+            if self.safety.slope_limited() {
+                self.counters.slope_limited_cycles += 1;
+            }
             if self.backend.write(&tau, self.period_s).is_err() {
                 self.counters.faults += 1;
             }
@@ -356,6 +372,9 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         }
         if m.saturated {
             s.flags |= state_flags::SATURATED;
+        }
+        if self.safety.slope_limited() {
+            s.flags |= state_flags::SLOPE_LIMITED;
         }
         s
     }
@@ -507,7 +526,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.lost_messages = core.lost_messages();
         st.refused_messages = core.counters.refused + core.counters.resets_refused;
         st.stale_cycles = core.counters.stale_cycles;
-        st.clamped_cycles = core.counters.saturated_cycles;
+        st.clamped_cycles = core.counters.saturated_cycles + core.counters.slope_limited_cycles;
         st.faults = core.counters.faults;
         st.motion_time_s = core.motion_time_s();
         st.latency = e2e.summary();

@@ -10,7 +10,10 @@
 //!
 //! Every switch between command torque and the actuator's own law is blended linearly
 //! over `ramp_ms` (counted in plant steps, so lockstep runs stay deterministic): never a
-//! torque step. The hold and damp laws use the nominal model:
+//! torque step. Last of all a torque slope (`torque_slope_ms`, a drive's CiA 402
+//! object 0x6087) bounds every step's change, `|Δτᵢ| ≤ τmaxᵢ·T/torque_slope_ms`, whatever
+//! the commands do — except the first torque after the drive is switched on, which takes
+//! over from the brakes. The hold and damp laws use the nominal model:
 //! `τ = M(q)(Kp (q_hold − q) − Kd qd) + h(q, qd)` (damp: Kp = 0 until every |qd| < 1 mrad/s).
 
 use microrobot_model::{JointVector, ModelData, Robot, mass_matrix, nonlinear_effects};
@@ -43,6 +46,12 @@ pub struct Safety {
     blend_from: JointVector,
     blend_step: u32,
     last_applied: JointVector,
+    /// Largest |Δτᵢ| per plant step (+∞: no slope limit).
+    slope_per_step: JointVector,
+    /// Whether `last_applied` was applied (the slope's reference); false until the first
+    /// torque after switch-on.
+    slope_armed: bool,
+    slope_limited: bool,
 }
 
 /// Velocity below which damping is considered at rest (rad/s).
@@ -66,7 +75,22 @@ impl Safety {
             blend_from: JointVector::zeros(),
             blend_step: u32::MAX,
             last_applied: JointVector::zeros(),
+            slope_per_step: JointVector::repeat(f64::INFINITY),
+            slope_armed: false,
+            slope_limited: false,
         }
+    }
+
+    /// Limits each step's torque change on joint i to `per_step[i]` (N·m or N).
+    pub fn with_slope(mut self, per_step: &JointVector) -> Self {
+        self.slope_per_step = *per_step;
+        self
+    }
+
+    /// The drive was (re-)enabled: its first torque takes over from the brakes, not from a
+    /// torque applied before.
+    pub fn on_switch_on(&mut self) {
+        self.slope_armed = false;
     }
 
     /// Current mode.
@@ -138,15 +162,35 @@ impl Safety {
             (Mode::Command, Some(c)) => *c,
             _ => self.own_law(q, qd),
         };
-        let out = if self.blend_step < self.ramp_steps {
+        let mut out = if self.blend_step < self.ramp_steps {
             self.blend_step += 1;
             let a = self.blend_step as f64 / self.ramp_steps as f64;
             self.blend_from * (1.0 - a) + target * a
         } else {
             target
         };
+        self.slope_limited = false;
+        if self.slope_armed {
+            for i in 0..self.dof {
+                let max = self.slope_per_step[i];
+                let d = out[i] - self.last_applied[i];
+                if d > max {
+                    out[i] = self.last_applied[i] + max;
+                    self.slope_limited = true;
+                } else if d < -max {
+                    out[i] = self.last_applied[i] - max;
+                    self.slope_limited = true;
+                }
+            }
+        }
+        self.slope_armed = true;
         self.last_applied = out;
         out
+    }
+
+    /// Whether the last [`Safety::torque`] was cut by the torque slope.
+    pub fn slope_limited(&self) -> bool {
+        self.slope_limited
     }
 
     /// Starts a blend from `tau` (a restarted actuator continues from the torque its
@@ -155,11 +199,13 @@ impl Safety {
         self.last_applied = *tau;
         self.blend_from = *tau;
         self.blend_step = 0;
+        self.slope_armed = true;
     }
 
     /// Records the torque actually applied (when the caller bypasses [`Safety::torque`]).
     pub fn set_last_applied(&mut self, tau: &JointVector) {
         self.last_applied = *tau;
+        self.slope_armed = true;
     }
 
     fn own_law(&mut self, q: &JointVector, qd: &JointVector) -> JointVector {
@@ -252,5 +298,32 @@ link = { mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0.
         let t = s.torque(None, &q, &qd)[0];
         // M = 0.25, a = −20 → −5 N·m, plus gravity 4.905.
         assert!((t - (4.905 - 5.0)).abs() < 1e-9, "{t}");
+    }
+
+    #[test]
+    fn the_torque_slope_bounds_every_step_except_the_switch_on() {
+        let r = robot();
+        let mut s = Safety::new(&r, 100.0, 20.0, SafeStateMode::Hold, 0)
+            .with_slope(&JointVector::repeat(2.0));
+        let q = JointVector::zeros();
+        let mut cmd = JointVector::zeros();
+        cmd[0] = 10.0;
+        // Switch-on: the drive takes over from the brakes at the commanded torque.
+        assert_eq!(s.torque(Some(&cmd), &q, &q)[0], 10.0);
+        assert!(!s.slope_limited());
+        cmd[0] = -5.0;
+        let mut prev = 10.0;
+        for k in 0..7 {
+            let t = s.torque(Some(&cmd), &q, &q)[0];
+            assert!((t - prev).abs() <= 2.0 + 1e-12, "step {k}: {prev} -> {t}");
+            assert!(s.slope_limited(), "step {k} is cut");
+            prev = t;
+        }
+        assert_eq!(prev, -4.0);
+        assert_eq!(s.torque(Some(&cmd), &q, &q)[0], -5.0);
+        assert!(!s.slope_limited());
+        s.on_switch_on();
+        cmd[0] = 20.0;
+        assert_eq!(s.torque(Some(&cmd), &q, &q)[0], 20.0);
     }
 }

@@ -10,6 +10,12 @@
 //! * Feedback off, or measured state stale: feed-forward Newton-Euler
 //!   `τ = rnea(qd, q̇d, q̈d)`, flagged `STATE_STALE` when feedback was wanted.
 //! * Every τ is clamped to the joint's effort limit and flagged `CLAMPED`.
+//! * Then slew-limited (`torque_slew_ms`, default 20 ms for a full-scale change):
+//!   `|τᵢ − τᵢ,prev| ≤ τmaxᵢ · Δt / torque_slew_ms`, Δt the logical time (ticks × period)
+//!   since the previous command, flagged `SLEW_LIMITED`. A jerk-limited plan never needs
+//!   more; what does is feedback reacting to a state that jumped — after a host stall the
+//!   free-running arm has moved open-loop for tens of ms — and a switch between feedback
+//!   and feed-forward. Those now reach the arm as ramps, not steps.
 //!
 //! In lockstep, setpoint k uses exactly measured state k−1 (the state the actuator
 //! published after applying torque k−1); otherwise the newest state younger than
@@ -41,6 +47,8 @@ pub struct Counters {
     pub stale_cycles: u64,
     /// Torques clamped to an effort limit.
     pub clamped_cycles: u64,
+    /// Torques slew-limited (see `torque_slew_ms`).
+    pub slew_limited_cycles: u64,
 }
 
 /// The torque computation, independent of IPC and clocks.
@@ -56,6 +64,10 @@ pub struct DynamicsCore {
     lockstep: bool,
     stale_ns: u64,
     effort: [f64; MAX_JOINTS],
+    /// Largest |Δτᵢ| per tick (N·m or N); +∞: no slew limit.
+    slew_per_tick: [f64; MAX_JOINTS],
+    /// The previous command's torque and tick (the slew limit's reference).
+    last_torque: Option<([f64; MAX_JOINTS], u64)>,
     bounds: JointBounds,
     sp_seq: SeqTracker,
     st_seq: SeqTracker,
@@ -85,6 +97,13 @@ impl DynamicsCore {
             bounds.q_max[i] = j.limits.max;
             bounds.qd_max[i] = j.limits.velocity;
         }
+        let mut slew_per_tick = [f64::INFINITY; MAX_JOINTS];
+        if cfg.dynamics.torque_slew_ms > 0.0 {
+            let ticks_per_slew = cfg.dynamics.torque_slew_ms * 1e-3 * cfg.rate_hz;
+            for i in 0..robot.dof() {
+                slew_per_tick[i] = effort[i] / ticks_per_slew;
+            }
+        }
         Self {
             data: ModelData::new(robot),
             dof: robot.dof(),
@@ -97,6 +116,8 @@ impl DynamicsCore {
             lockstep: cfg.lockstep,
             stale_ns: (cfg.watchdog.stale_ms * 1e6) as u64,
             effort,
+            slew_per_tick,
+            last_torque: None,
             bounds,
             sp_seq: SeqTracker::default(),
             st_seq: SeqTracker::default(),
@@ -246,6 +267,30 @@ impl DynamicsCore {
             flags |= torque_flags::CLAMPED;
             self.counters.clamped_cycles += 1;
         }
+        if let Some((prev, prev_tick)) = self.last_torque {
+            // A tick that does not advance (a restarted planner counts from its own start)
+            // still allows one tick's change: the bound never freezes the torque.
+            let dt_ticks = sp.header.tick.saturating_sub(prev_tick).max(1) as f64;
+            let mut limited = false;
+            for i in 0..n {
+                let max = self.slew_per_tick[i] * dt_ticks;
+                let d = tau[i] - prev[i];
+                if d > max {
+                    tau[i] = prev[i] + max;
+                    limited = true;
+                } else if d < -max {
+                    tau[i] = prev[i] - max;
+                    limited = true;
+                }
+            }
+            if limited {
+                flags |= torque_flags::SLEW_LIMITED;
+                self.counters.slew_limited_cycles += 1;
+            }
+        }
+        let mut kept = [0.0; MAX_JOINTS];
+        kept[..n].copy_from_slice(&tau.as_slice()[..n]);
+        self.last_torque = Some((kept, sp.header.tick));
         self.torque_seq += 1;
         self.counters.cycles += 1;
         let mut out = TorqueCommand {
@@ -334,7 +379,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.lost_messages = core.lost_messages();
         st.refused_messages = core.counters.refused;
         st.stale_cycles = core.counters.stale_cycles + stale_no_input;
-        st.clamped_cycles = core.counters.clamped_cycles;
+        // Effort clamps and slew limits together (the torque flags tell them apart).
+        st.clamped_cycles = core.counters.clamped_cycles + core.counters.slew_limited_cycles;
         st.latency = lat.summary();
         st.peak_torque = core.peak_torque;
         st.motion_time_s = core.last_tick().unwrap_or(0) as f64 / cfg.rate_hz;

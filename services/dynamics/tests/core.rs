@@ -149,3 +149,63 @@ fn bad_setpoints_get_no_torque() {
     assert_eq!(d.counters.refused, 4);
     assert_eq!(d.counters.cycles, 1);
 }
+
+/// A host stall: the free-running arm kept moving open-loop while the pipeline was held,
+/// so the next state is 30 ms away from where the plan is. Feedback would answer with a
+/// torque step; the slew limit turns it into a ramp of τmax·Δt/torque_slew_ms per tick,
+/// flagged, and the torque still reaches the unlimited value once the ramp has run.
+#[test]
+fn a_state_that_jumped_gives_a_torque_ramp_not_a_step() {
+    let c = cfg(false);
+    let robot = Robot::from_file(&c.robot).unwrap();
+    let mut d = DynamicsCore::new(&robot, &c);
+    let mut free = DynamicsCore::new(
+        &robot,
+        &PipelineConfig {
+            dynamics: microrobot_runtime::config::DynamicsConfig {
+                torque_slew_ms: 0.0,
+                ..c.dynamics.clone()
+            },
+            ..c.clone()
+        },
+    );
+    let now = 1000 * MS;
+    d.accept_state(&state(1, 0, now, Q), 9).unwrap();
+    let first = d.compute(&sp(1, now, Q, [0.0; 6]), 1, now).unwrap();
+    assert_eq!(first.flags & torque_flags::SLEW_LIMITED, 0);
+    // The arm sagged 0.02 rad on every joint while nothing ran.
+    let sagged = Q.map(|q| q - 0.02);
+    let per_tick: Vec<f64> = robot
+        .joints()
+        .iter()
+        .map(|j| j.limits.effort / (c.dynamics.torque_slew_ms * 1e-3 * c.rate_hz))
+        .collect();
+    free.accept_state(&state(1, 1, now, sagged), 9).unwrap();
+    let wanted = free.compute(&sp(2, now, Q, [0.0; 6]), 1, now).unwrap();
+    let mut prev = first;
+    for k in 2..40u64 {
+        d.accept_state(&state(k, k - 1, now, sagged), 9).unwrap();
+        let t = d.compute(&sp(k, now, Q, [0.0; 6]), 1, now).unwrap();
+        for i in 0..6 {
+            let step = (t.tau[i] - prev.tau[i]).abs();
+            assert!(
+                step <= per_tick[i] * (1.0 + 1e-12),
+                "tick {k} joint {i}: step {step} > {}",
+                per_tick[i]
+            );
+        }
+        if k == 2 {
+            assert_ne!(t.flags & torque_flags::SLEW_LIMITED, 0, "the step is cut");
+        }
+        prev = t;
+    }
+    for i in 0..6 {
+        assert!(
+            (prev.tau[i] - wanted.tau[i]).abs() < 1e-9,
+            "joint {i}: ramp ends at {} not {}",
+            prev.tau[i],
+            wanted.tau[i]
+        );
+    }
+    assert!(d.counters.slew_limited_cycles >= 1);
+}

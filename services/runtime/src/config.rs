@@ -132,6 +132,9 @@ pub struct DynamicsConfig {
     pub kp_per_s2: f64,
     /// Velocity gain Kd (1/s).
     pub kd_per_s: f64,
+    /// Minimum time for a commanded torque to change by the joint's full effort limit
+    /// (ms); 0 = no slew limit.
+    pub torque_slew_ms: f64,
 }
 
 /// `[actuator.sim]`: the simulated arm.
@@ -170,6 +173,9 @@ pub struct ActuatorConfig {
     pub hold_kp_per_s2: f64,
     /// Safe-state hold / damping gain (1/s).
     pub hold_kd_per_s: f64,
+    /// Minimum time for the applied torque to change by the joint's full effort limit
+    /// (ms), a drive's torque slope; 0 = none.
+    pub torque_slope_ms: f64,
     /// The simulated arm.
     pub sim: SimConfig,
 }
@@ -263,12 +269,14 @@ impl Default for PipelineConfig {
                 delay_compensation: true,
                 kp_per_s2: 2500.0,
                 kd_per_s: 100.0,
+                torque_slew_ms: 20.0,
             },
             actuator: ActuatorConfig {
                 backend: BackendKind::Sim,
                 command: None,
                 hold_kp_per_s2: 400.0,
                 hold_kd_per_s: 40.0,
+                torque_slope_ms: 10.0,
                 sim: SimConfig {
                     mass_scale: 1.0,
                     viscous_friction_nms: 0.0,
@@ -397,6 +405,7 @@ impl PipelineConfig {
         let _ = writeln!(s, "delay_compensation = {}", d.delay_compensation);
         let _ = writeln!(s, "kp_per_s2 = {}", f(d.kp_per_s2));
         let _ = writeln!(s, "kd_per_s = {}", f(d.kd_per_s));
+        let _ = writeln!(s, "torque_slew_ms = {}", f(d.torque_slew_ms));
         let a = &self.actuator;
         let _ = writeln!(s, "\n[actuator]");
         let _ = writeln!(s, "backend = \"sim\"");
@@ -406,6 +415,7 @@ impl PipelineConfig {
         }
         let _ = writeln!(s, "hold_kp_per_s2 = {}", f(a.hold_kp_per_s2));
         let _ = writeln!(s, "hold_kd_per_s = {}", f(a.hold_kd_per_s));
+        let _ = writeln!(s, "torque_slope_ms = {}", f(a.torque_slope_ms));
         let m = &a.sim;
         let _ = writeln!(s, "\n[actuator.sim]");
         let _ = writeln!(s, "mass_scale = {}", f(m.mass_scale));
@@ -811,7 +821,13 @@ impl Reader<'_> {
             root,
             "",
             "dynamics",
-            &["feedback", "delay_compensation", "kp_per_s2", "kd_per_s"],
+            &[
+                "feedback",
+                "delay_compensation",
+                "kp_per_s2",
+                "kd_per_s",
+                "torque_slew_ms",
+            ],
         )?;
         let dd = &d.dynamics;
         let dynamics = DynamicsConfig {
@@ -819,6 +835,14 @@ impl Reader<'_> {
             delay_compensation: self.bool(&t, "delay_compensation", dd.delay_compensation)?,
             kp_per_s2: self.f64_in(&t, "kp_per_s2", dd.kp_per_s2, 0.0, 1.0e7, false)?,
             kd_per_s: self.f64_in(&t, "kd_per_s", dd.kd_per_s, 0.0, 1.0e5, false)?,
+            torque_slew_ms: self.f64_in(
+                &t,
+                "torque_slew_ms",
+                dd.torque_slew_ms,
+                0.0,
+                10_000.0,
+                false,
+            )?,
         };
         // Discrete stability of the computed-torque loop at this rate (one-period delay).
         if dynamics.kd_per_s / rate_hz > 1.0 || dynamics.kp_per_s2 / (rate_hz * rate_hz) > 0.5 {
@@ -840,6 +864,7 @@ impl Reader<'_> {
                 "command",
                 "hold_kp_per_s2",
                 "hold_kd_per_s",
+                "torque_slope_ms",
                 "sim",
             ],
         )?;
@@ -870,6 +895,14 @@ impl Reader<'_> {
         let hold_kp_per_s2 =
             self.f64_in(&t, "hold_kp_per_s2", da.hold_kp_per_s2, 0.0, 1.0e7, false)?;
         let hold_kd_per_s = self.f64_in(&t, "hold_kd_per_s", da.hold_kd_per_s, 0.0, 1.0e5, true)?;
+        let torque_slope_ms = self.f64_in(
+            &t,
+            "torque_slope_ms",
+            da.torque_slope_ms,
+            0.0,
+            10_000.0,
+            false,
+        )?;
         let empty = Table::new();
         let s = self.tab(
             t.table.unwrap_or(&empty),
@@ -965,6 +998,7 @@ impl Reader<'_> {
             command,
             hold_kp_per_s2,
             hold_kd_per_s,
+            torque_slope_ms,
             sim,
         };
 

@@ -2,8 +2,10 @@
 //!
 //! 1. clutch: on engage the references are re-taken (the tool's commanded point and
 //!    the hand's current position), so re-engaging continues from where the arm is;
-//!    on release (or a stale master) the tool is brought to rest at the point where
-//!    braking at the acceleration limit ends, and held;
+//!    on release (or a stale master) the arm freezes: every joint takes its fastest
+//!    jerk-limited stop and is held where it ends (no IK runs while disengaged, so the
+//!    held joints cannot drift), and the tool's commanded point becomes the forward
+//!    kinematics of that rest pose;
 //! 2. scaling of the hand's displacement since engage (ratio, device frame → base);
 //! 3. the tremor filter on the scaled displacement;
 //! 4. Cartesian velocity/acceleration limits on the commanded tool point, the speed
@@ -301,7 +303,13 @@ impl TeleopController {
             self.tool_ref = self.limiter.position;
             self.filter.reset_to(Vector3::zeros());
         } else if !engage && self.engaged {
-            self.hold_point = self.limiter.stopping_point();
+            // Freeze: the fastest stop of every joint, held there.
+            self.q_target = self.tracker.stopping_point();
+            self.hold_point = forward_kinematics(&self.robot, &mut self.data, &self.q_target)
+                .translation
+                .vector;
+            self.limiter.stop_at(self.hold_point);
+            self.accepted_tool = self.hold_point;
         }
         self.engaged = engage;
         let desired = match hand {
@@ -341,6 +349,17 @@ impl TeleopController {
         let mut moving_target = false;
 
         let target = IkTarget::Position(self.limiter.position);
+        if !self.engaged {
+            // Disengaged: the joints stop and hold at `q_target` (set on release or at
+            // restart); nothing the hand does moves them.
+            let sample = *self.tracker.step(&self.q_target, &JointVector::zeros());
+            return TeleopStep {
+                sample,
+                flags: f,
+                tool_command: self.limiter.position,
+                tool_desired: desired,
+            };
+        }
         match solve_local(
             &self.robot,
             &mut self.data,

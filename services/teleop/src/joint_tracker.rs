@@ -10,7 +10,9 @@
 //! planner aims at q_t + D(q̇_t)), which removes the lag a rest-to-rest aim has:
 //! following at the target's speed, "brake now" then ends on the target.
 
-use microrobot_trajectory::soft::{Kin, Limits1, Phases, brake::brake, from_state::time_optimal};
+use microrobot_trajectory::soft::{
+    Kin, Limits1, Phases, brake::brake, from_state::brake_point, from_state::time_optimal,
+};
 use microrobot_trajectory::{JointVector, KinematicLimits, MAX_JOINTS, Sample};
 
 /// Per-joint jerk-limited tracker.
@@ -81,6 +83,26 @@ impl JointTracker {
     /// The current setpoint (q, q̇, q̈, jerk of the last cycle).
     pub fn state(&self) -> &Sample {
         &self.state
+    }
+
+    /// Where each joint comes to rest on its fastest jerk-limited stop from the current
+    /// state (after the brake pre-phase if the state is outside the limits), clamped into
+    /// the position limits. Aiming [`JointTracker::step`] here with zero target velocity
+    /// is that stop: the time-optimal motion to its own end point.
+    pub fn stopping_point(&self) -> JointVector {
+        let mut out = self.state.q;
+        for i in 0..self.dof {
+            let lim = &self.limits[i];
+            let k0 = Kin {
+                p: self.state.q[i],
+                v: self.state.qd[i],
+                a: self.state.qdd[i],
+            };
+            let k1 = brake(k0, lim).integrate(k0);
+            out[i] = (k1.p + brake_point(k1.v, k1.a, lim))
+                .clamp(self.position_min[i], self.position_max[i]);
+        }
+        out
     }
 
     /// Restarts from `s` (when another motion generator handed over).

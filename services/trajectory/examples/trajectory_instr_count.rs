@@ -4,7 +4,7 @@
 //!
 //! ```sh
 //! valgrind --tool=callgrind --toggle-collect='*run_from_state*' \
-//!     target/release/examples/instr_count from_state 256
+//!     target/release/examples/trajectory_instr_count from_state 256
 //! ```
 //!
 //! Workloads: `rest_to_rest` (Table 4), `from_state` (the bench's 256 random

@@ -4,11 +4,11 @@
 //! (Ir at `CALLS` − Ir at 0 calls) / `CALLS`:
 //!
 //! ```text
-//! cargo build --release -p microrobot-model --example instr_count
+//! cargo build --release -p microrobot-model --example model_instr_count
 //! for a in fk jacobian rnea mass_matrix forward_dynamics; do
 //!   for n in 0 10000; do
 //!     valgrind --tool=callgrind --callgrind-out-file=/dev/null \
-//!       target/release/examples/instr_count $a $n 2>&1 | grep 'refs:'
+//!       target/release/examples/model_instr_count $a $n 2>&1 | grep 'refs:'
 //!   done
 //! done
 //! ```
@@ -29,7 +29,7 @@ fn main() {
         args.get(2).and_then(|n| n.parse::<usize>().ok()),
     ) else {
         eprintln!(
-            "usage: instr_count fk|jacobian|rnea|mass_matrix|forward_dynamics|lagrange_euler CALLS"
+            "usage: model_instr_count fk|jacobian|rnea|mass_matrix|forward_dynamics|lagrange_euler CALLS"
         );
         std::process::exit(2);
     };
