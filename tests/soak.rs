@@ -7,7 +7,6 @@ mod common;
 use common::*;
 
 #[test]
-#[ignore = "flaky on a loaded 2-core VM: about 1 run in 3 reports a commanded torque step after a ~30 ms host stall (issue 5); run with --ignored"]
 fn a_short_soak_with_a_kill_of_each_service_recovers_without_jumps_or_losses() {
     let dir = tempfile::tempdir().expect("tempdir");
     let inst = instance("soak");
