@@ -239,3 +239,55 @@ fn example_driver_in_place_of_the_actuator_runs_table4_to_the_end() {
     );
     assert_eq!(s["services"]["actuator"]["exit"], "exit code 0", "{s}");
 }
+
+/// `--floor-probe`: a bare timer loop with the same settings runs alongside and the
+/// summary reports it next to the planner (issue 4's "against the floor in the same
+/// run"), with each service's CPU share. Without the flag there is no floor.
+#[test]
+fn free_running_run_reports_the_timer_floor_and_cpu_shares() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("floor");
+    let cfg = write_config(dir.path(), &inst, "", "");
+    let cfg_s = cfg.to_str().expect("utf-8");
+    let with = dir.path().join("with.json");
+    let without = dir.path().join("without.json");
+    for (path, extra) in [(&with, Some("--floor-probe")), (&without, None)] {
+        let mut args = vec![
+            "run",
+            "--config",
+            cfg_s,
+            "--no-program",
+            "--duration",
+            "2",
+            "--quiet",
+            "--summary-json",
+            path.to_str().expect("utf-8"),
+        ];
+        args.extend(extra);
+        let out = run(&args, 120.0);
+        assert_eq!(out.code(), Some(0), "run {args:?}; stderr:\n{}", out.stderr);
+        if extra.is_some() {
+            assert!(out.stdout.contains("timer floor:"), "{}", out.stdout);
+        }
+    }
+    let s = summary(&with);
+    let floor = &s["floor"];
+    let ticks = floor["ticks"].as_u64().expect("floor ticks");
+    assert!(ticks > 100, "the probe ticked: {s}");
+    assert_eq!(floor["lateness_us"]["count"].as_u64(), Some(ticks), "{s}");
+    assert!(floor["deadline_misses"].as_u64().is_some(), "{s}");
+    let total = s["cpu_percent_total"].as_f64().expect("cpu_percent_total");
+    let parts: f64 = ["planner", "dynamics", "actuator"]
+        .iter()
+        .map(|r| {
+            s["services"][r]["cpu_percent"]
+                .as_f64()
+                .expect("cpu_percent")
+        })
+        .sum();
+    assert!(
+        total > 0.0 && (total - parts).abs() < 1e-9,
+        "{total} vs {parts}: {s}"
+    );
+    assert!(summary(&without)["floor"].is_null());
+}

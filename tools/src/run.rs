@@ -68,11 +68,23 @@ pub struct RunArgs {
     /// services so it sees the first setpoint, stopped after them).
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
+    /// Run a bare timer loop alongside, at the same rate with the same real-time settings
+    /// (the machine's timer floor), and report the planner's lateness and misses against
+    /// it in the summary (`floor`). It shares the services' CPU, so it costs them a little.
+    #[arg(long)]
+    pub floor_probe: bool,
 }
 
 /// Runs the pipeline; the exit code is one of [`exit_code`].
 pub fn main(args: RunArgs) -> ExitCode {
-    let result = supervise_with(&args, &mut NoHooks).and_then(|(code, summary)| {
+    let mut floor = FloorProbe::default();
+    let hooks: &mut dyn Hooks = if args.floor_probe {
+        &mut floor
+    } else {
+        &mut NoHooks
+    };
+    let result = supervise_with(&args, hooks).and_then(|(code, mut summary)| {
+        summary.floor = floor.finish();
         println!("{}", summary.render());
         if let Some(path) = &args.summary_json {
             write_summary_json(&summary, path).map_err(fail(exit_code::FAILURE))?;
@@ -129,6 +141,68 @@ pub trait Hooks {
 pub struct NoHooks;
 
 impl Hooks for NoHooks {}
+
+/// `microrobot run --floor-probe`: the bare timer loop of
+/// [`microrobot_runtime::timer::floor_probe_until`] in a thread with the pipeline's
+/// real-time settings, from the moment every service is ready to the end of the run.
+#[derive(Default)]
+pub struct FloorProbe {
+    settings: Option<(microrobot_runtime::config::RealtimeConfig, u64)>,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread:
+        Option<std::thread::JoinHandle<std::io::Result<microrobot_runtime::timer::FloorReport>>>,
+}
+
+impl FloorProbe {
+    /// Stops the loop and returns its figures (None if it never ran or failed).
+    pub fn finish(&mut self) -> Option<crate::supervisor::summary::Floor> {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        match self.thread.take()?.join() {
+            Ok(Ok(f)) => Some(crate::supervisor::summary::Floor {
+                ticks: f.ticks,
+                lateness_us: crate::supervisor::summary::Percentiles::from(&f.lateness),
+                deadline_misses: f.deadline_misses,
+            }),
+            Ok(Err(e)) => {
+                eprintln!("warning: the floor probe failed: {e}");
+                None
+            }
+            Err(_) => None,
+        }
+    }
+}
+
+impl Hooks for FloorProbe {
+    fn before_start(&mut self, cfg: &PipelineConfig) -> anyhow::Result<()> {
+        let mut rt = cfg.realtime.clone();
+        if cfg.lockstep {
+            // Lockstep services run without SCHED_FIFO; so does their floor.
+            rt.sched_fifo_priority = 0;
+        }
+        // The supervisor's memory need not be locked for a timer loop.
+        rt.mlockall = false;
+        self.settings = Some((rt, cfg.period_ns()));
+        Ok(())
+    }
+
+    fn poll(&mut self, _ctl: &mut Control<'_>) {
+        if self.thread.is_some() {
+            return;
+        }
+        let Some((rt, period)) = self.settings.take() else {
+            return;
+        };
+        let stop = self.stop.clone();
+        self.thread = std::thread::Builder::new()
+            .name("floor-probe".into())
+            .spawn(move || {
+                let _guard = microrobot_runtime::rt::apply(&rt);
+                // At most a day; `finish` ends it with the run.
+                microrobot_runtime::timer::floor_probe_until(period, 86_400_000_000_000, &stop)
+            })
+            .ok();
+    }
+}
 
 /// What [`Hooks::poll`] may look at and do.
 pub struct Control<'a> {

@@ -198,6 +198,20 @@ pub struct FloorReport {
 /// thread). Lateness and misses are defined exactly as for the planner, so the planner's
 /// figures compare against it.
 pub fn floor_probe(period_ns: u64, duration_ns: u64) -> std::io::Result<FloorReport> {
+    floor_probe_until(
+        period_ns,
+        duration_ns,
+        &std::sync::atomic::AtomicBool::new(false),
+    )
+}
+
+/// [`floor_probe`] that also ends within one period (or at most 1 s) once `stop` is set,
+/// for runs whose length is not known at the start (`microrobot run --floor-probe`).
+pub fn floor_probe_until(
+    period_ns: u64,
+    duration_ns: u64,
+    stop: &std::sync::atomic::AtomicBool,
+) -> std::io::Result<FloorReport> {
     let mut hist = crate::stats::LatencyHistogram::new();
     let mut clock = PeriodicClock::start(period_ns, OverrunPolicy::Skip)?;
     let end = monotonic_ns() + duration_ns;
@@ -218,7 +232,7 @@ pub fn floor_probe(period_ns: u64, duration_ns: u64) -> std::io::Result<FloorRep
             hist.record(now.saturating_sub(t.ideal_ns));
             ticks += 1;
         }
-        if now >= end {
+        if now >= end || stop.load(std::sync::atomic::Ordering::Relaxed) {
             break;
         }
     }

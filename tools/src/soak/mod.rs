@@ -210,6 +210,7 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
         mass_scale: None,
         quiet: args.quiet,
         record: None,
+        floor_probe: false,
     };
     let mut cfg = run::resolve_config(&base).map_err(bad)?;
     // The soak restarts what it kills, as often as it kills.

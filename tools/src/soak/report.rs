@@ -90,13 +90,8 @@ pub struct Resources {
     pub table: Vec<(f64, u32, u64, Option<f64>)>,
 }
 
-/// The timer floor measured alongside.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct Floor {
-    pub ticks: u64,
-    pub lateness_us: Percentiles,
-    pub deadline_misses: u64,
-}
+/// The timer floor measured alongside (the same figures as `microrobot run --floor-probe`).
+pub use crate::supervisor::summary::Floor;
 
 /// Pass/fail and why.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]

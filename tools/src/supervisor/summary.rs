@@ -53,6 +53,8 @@ pub struct ServiceSummary {
     /// How the (last) process ended: `exit code 0`, `killed by signal 9`, ...
     pub exit: String,
     pub cpu_time_ms: u64,
+    /// CPU time over the run's wall time, % of one core (startup included).
+    pub cpu_percent: f64,
     pub rss_kib: u64,
     /// The service's own latency (planner: lateness, dynamics: setpoint→torque, actuator: end-to-end).
     pub latency_us: Percentiles,
@@ -96,7 +98,20 @@ pub struct Summary {
     /// The largest such time of the run (µs; null: no e-stop).
     pub estop_latency_max_us: Option<f64>,
     pub services: BTreeMap<String, ServiceSummary>,
+    /// The three services' CPU time over the wall time, % of one core.
+    pub cpu_percent_total: f64,
+    /// The bare timer loop run alongside (`--floor-probe`), null without it.
+    pub floor: Option<Floor>,
     pub run_dir: String,
+}
+
+/// The machine's timer floor measured in the same run: a bare timerfd loop at the same
+/// rate with the same real-time settings, lateness and misses defined as the planner's.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Floor {
+    pub ticks: u64,
+    pub lateness_us: Percentiles,
+    pub deadline_misses: u64,
 }
 
 /// Adds the counters of `s` (one process's last status) into `acc` (over restarts):
@@ -162,6 +177,15 @@ pub struct RunFacts {
     pub run_dir: String,
 }
 
+/// `cpu_ms` of CPU time over `wall_s` of wall time, in % of one core.
+fn percent_of(cpu_ms: f64, wall_s: f64) -> f64 {
+    if wall_s > 0.0 {
+        cpu_ms / (wall_s * 1e3) * 100.0
+    } else {
+        0.0
+    }
+}
+
 impl Summary {
     /// Builds the summary from per-role totals (index: [`slot`]), restart counts and exits.
     pub fn build(
@@ -203,6 +227,7 @@ impl Summary {
                     },
                     exit: exits[i].clone(),
                     cpu_time_ms: st.cpu_time_ms as u64,
+                    cpu_percent: percent_of(st.cpu_time_ms as f64, facts.wall_time_s),
                     rss_kib: st.rss_kib,
                     latency_us: Percentiles::from(&st.latency),
                 },
@@ -247,7 +272,12 @@ impl Summary {
                 .then(|| planner.estop_latency_ns as f64 / 1e3),
             estop_latency_max_us: (planner.estop_latency_max_ns > 0)
                 .then(|| planner.estop_latency_max_ns as f64 / 1e3),
+            cpu_percent_total: percent_of(
+                totals.iter().flatten().map(|s| s.cpu_time_ms as f64).sum(),
+                facts.wall_time_s,
+            ),
             services,
+            floor: None,
             run_dir: facts.run_dir,
         }
     }
@@ -314,6 +344,24 @@ impl Summary {
         };
         let _ = writeln!(s, "  end-to-end latency: {}", p(&self.e2e_latency_us));
         let _ = writeln!(s, "  planner lateness:   {}", p(&self.planner_lateness_us));
+        if let Some(f) = &self.floor {
+            let _ = writeln!(
+                s,
+                "  timer floor:        {} ({} misses in {} ticks of a bare timer loop; the planner missed {})",
+                p(&f.lateness_us),
+                f.deadline_misses,
+                f.ticks,
+                self.deadline_misses
+            );
+        }
+        let _ = writeln!(
+            s,
+            "  CPU:                {:.2} % of one core in total (planner {:.2}, dynamics {:.2}, actuator {:.2})",
+            self.cpu_percent_total,
+            self.services.get("planner").map_or(0.0, |v| v.cpu_percent),
+            self.services.get("dynamics").map_or(0.0, |v| v.cpu_percent),
+            self.services.get("actuator").map_or(0.0, |v| v.cpu_percent),
+        );
         let fmt = |v: &[f64], scale: f64, prec: usize| {
             v.iter()
                 .map(|x| format!("{:.*}", prec, x * scale))
