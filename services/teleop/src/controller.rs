@@ -216,7 +216,7 @@ impl TeleopController {
             tracker: JointTracker::new(robot.dof(), limits, dt, start),
             ik_options: IkOptions {
                 max_iterations: 20,
-                position_tolerance_m: 1e-9,
+                position_tolerance_m: 1e-12,
                 orientation_tolerance_rad: 1.0,
                 restarts: 0,
                 ..IkOptions::default()
@@ -260,6 +260,16 @@ impl TeleopController {
         self.hold_point = tool;
         self.last_hand = None;
         self.last_desired = tool;
+    }
+
+    /// The joint tracker (its counters tell how often the linear law tracked).
+    pub fn tracker(&self) -> &JointTracker {
+        &self.tracker
+    }
+
+    /// The IK solution the joints are steered to (held while disengaged).
+    pub fn joint_target(&self) -> &JointVector {
+        &self.q_target
     }
 
     /// Whether the hand currently drives the tool.

@@ -6,13 +6,35 @@
 //! within |q̇| ≤ v, |q̈| ≤ a, |jerk| ≤ j of every joint and never jumps, whatever the
 //! target does, and it lands exactly on a target that stops.
 //!
-//! A moving target is led by the distance its velocity needs to brake (the
-//! planner aims at q_t + D(q̇_t)), which removes the lag a rest-to-rest aim has:
-//! following at the target's speed, "brake now" then ends on the target.
+//! A moving target is followed in two ways:
+//! * close to it, by a linear third-order tracking law with the target's velocity and
+//!   acceleration and jerk fed forward (finite differences of its velocity),
+//!   `jerk = j_t + Ω³(q_t − q) + 3Ω²(q̇_t − q̇) + 3Ω(q̈_t − q̈)`
+//!   (a triple pole at −Ω, [`TRACKING_OMEGA`]; halved up to [`LINEAR_HALVINGS`] times
+//!   until the jerk is within the limit, so the law gets gentler rather than saturating
+//!   far from the target), taken only when the state it reaches can still stop within every limit (|q̈| ≤ a, the
+//!   stop-velocity within ±v, the fastest stop inside the position limits). Re-aiming a
+//!   rest-to-rest motion every cycle follows a sinusoid with a large lag, or, led by the
+//!   brake distance, overshoots it (+7 % at 0.5 Hz on the seed arm's 80 °/s³ jerk limit);
+//!   the linear law tracks it within a fraction of a percent;
+//! * otherwise (far from it, the law saturated, or a state that could not stop in
+//!   time), by the time-optimal motion to rest at the target led by the distance its
+//!   velocity needs to brake (the aim is q_t + D(q̇_t)): following at the target's speed,
+//!   "brake now" then ends on the target.
+//!
+//! A target at rest is always approached time-optimally, and landed on exactly.
 
 use microrobot_trajectory::soft::{
     Kin, Limits1, Phases, brake::brake, from_state::brake_point, from_state::time_optimal,
+    stop_velocity,
 };
+
+/// How many times the linear law's bandwidth may be halved to keep its jerk within the
+/// limit before the time-optimal motion takes over (Ω/16 at the least).
+pub const LINEAR_HALVINGS: u32 = 4;
+
+/// Bandwidth Ω of the linear tracking law (rad/s): a triple pole at −Ω, about 3 Hz.
+pub const TRACKING_OMEGA: f64 = 20.0;
 use microrobot_trajectory::{JointVector, KinematicLimits, MAX_JOINTS, Sample};
 
 /// Per-joint jerk-limited tracker.
@@ -24,6 +46,15 @@ pub struct JointTracker {
     position_min: JointVector,
     position_max: JointVector,
     state: Sample,
+    /// The target velocity of the previous cycle (the target's acceleration is its
+    /// difference).
+    last_target_velocity: JointVector,
+    /// The target acceleration of the previous cycle (the target's jerk is its difference).
+    last_target_acceleration: JointVector,
+    /// Cycles per joint taken by the linear tracking law (the rest: time-optimal).
+    pub linear_steps: [u64; MAX_JOINTS],
+    /// Cycles stepped.
+    pub steps: u64,
 }
 
 /// Signed distance the time-optimal jerk-limited stop from velocity `v` (at zero
@@ -77,6 +108,10 @@ impl JointTracker {
             position_min: limits.position_min,
             position_max: limits.position_max,
             state: start,
+            last_target_velocity: JointVector::zeros(),
+            last_target_acceleration: JointVector::zeros(),
+            linear_steps: [0; MAX_JOINTS],
+            steps: 0,
         }
     }
 
@@ -108,6 +143,43 @@ impl JointTracker {
     /// Restarts from `s` (when another motion generator handed over).
     pub fn reset(&mut self, s: Sample) {
         self.state = s;
+        self.last_target_velocity = JointVector::zeros();
+        self.last_target_acceleration = JointVector::zeros();
+    }
+
+    /// One cycle of the linear tracking law for joint `i` from `k0` towards the target
+    /// (q_t, q̇_t, q̈_t, its jerk `jt` fed forward), or `None` when its jerk exceeds the limit or the state it
+    /// reaches could not stop within the limits.
+    #[inline]
+    fn linear_step(&self, i: usize, k0: Kin, target: Kin, jt: f64) -> Option<Kin> {
+        let lim = &self.limits[i];
+        let (e, ev, ea) = (target.p - k0.p, target.v - k0.v, target.a - k0.a);
+        // The largest bandwidth Ω·2^−k whose jerk is within the limit: far from the
+        // target the law gets gentler instead of saturating (a saturated third-order law
+        // can limit-cycle).
+        let mut w = TRACKING_OMEGA;
+        let mut j = f64::INFINITY;
+        for _ in 0..=LINEAR_HALVINGS {
+            j = jt + w * (3.0 * ea + w * (3.0 * ev + w * e));
+            if j.abs() <= lim.j {
+                break;
+            }
+            w *= 0.5;
+        }
+        // (NaN fails the comparison too.)
+        if j.abs() > lim.j || j.is_nan() {
+            return None;
+        }
+        let k1 = k0.advance(self.dt, j);
+        let stop_at = k1.p + brake_point(k1.v, k1.a, lim);
+        let safe = k1.a.abs() <= lim.a
+            && stop_velocity(k1.v, k1.a, lim.j).abs() <= lim.v
+            && k1.v.abs() <= lim.v
+            && stop_at >= self.position_min[i]
+            && stop_at <= self.position_max[i]
+            && k1.p >= self.position_min[i]
+            && k1.p <= self.position_max[i];
+        safe.then_some(k1)
     }
 
     /// Advances every joint one cycle towards `target` (moving at `target_velocity`;
@@ -125,6 +197,28 @@ impl JointTracker {
                 v: self.state.qd[i],
                 a: self.state.qdd[i],
             };
+            let vt = target_velocity[i];
+            let at = (vt - self.last_target_velocity[i]) / self.dt;
+            let jt = (at - self.last_target_acceleration[i]) / self.dt;
+            self.last_target_acceleration[i] = at;
+            let linear = if vt != 0.0 {
+                let t = Kin {
+                    p: target[i],
+                    v: vt,
+                    a: at,
+                };
+                self.linear_step(i, k0, t, jt)
+            } else {
+                None
+            };
+            if let Some(k) = linear {
+                self.linear_steps[i] += 1;
+                self.state.jerk[i] = (k.a - k0.a) / self.dt;
+                self.state.q[i] = k.p;
+                self.state.qd[i] = k.v;
+                self.state.qdd[i] = k.a;
+                continue;
+            }
             let mut phases = brake(k0, lim);
             let k1 = phases.integrate(k0);
             phases.extend(&time_optimal(k1.v, k1.a, aim - k1.p, lim));
@@ -144,6 +238,8 @@ impl JointTracker {
             self.state.qd[i] = k.v;
             self.state.qdd[i] = k.a;
         }
+        self.last_target_velocity = *target_velocity;
+        self.steps += 1;
         &self.state
     }
 }
