@@ -540,6 +540,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     fill(&mut st, &core, &e2e, 0);
     status.publish(monotonic_ns(), &mut st);
 
+    // Set up: from here on the loop runs pinned and SCHED_FIFO.
+    microrobot_runtime::enter_cycle();
     while !shutdown.is_requested() {
         let mut fired = [false; 4];
         ws.wait_and_process_once(|id| {

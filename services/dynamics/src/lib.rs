@@ -394,6 +394,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let mut last_setpoint_ns = monotonic_ns();
     let mut input_stale_periods = 0u64;
 
+    // Set up: from here on the loop runs pinned and SCHED_FIFO.
+    microrobot_runtime::enter_cycle();
     while !shutdown.is_requested() {
         let mut fired = [false; 3];
         ws.wait_and_process_once(|id| {

@@ -959,6 +959,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     fill(&mut st, &core, &lateness, &ticker, state_clock_misses);
     status.publish(monotonic_ns(), &mut st);
 
+    // Set up: from here on the loop runs pinned and SCHED_FIFO.
+    microrobot_runtime::enter_cycle();
     while !shutdown.is_requested() {
         let mut fired = [false; 4];
         ws.wait_and_process_once(|id| {

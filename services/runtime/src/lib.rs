@@ -50,10 +50,32 @@ pub type ServiceFn = fn(&PipelineConfig, &Shutdown) -> anyhow::Result<()>;
 #[error("{0}")]
 pub struct BadConfig(pub String);
 
+/// The cyclic settings [`enter_cycle`] applies (set by [`service_main`]).
+static CYCLE_SETTINGS: std::sync::Mutex<Option<config::RealtimeConfig>> =
+    std::sync::Mutex::new(None);
+
+/// Called by a service right before its cyclic loop: pins it to its CPUs and makes it
+/// SCHED_FIFO (each falling back with one warning), once. Everything before — loading
+/// the model, opening ports, locking memory, waiting for the first state — ran as an
+/// ordinary task, so a restarting service never holds up the running pipeline's
+/// real-time stages on their CPU. Does nothing outside [`service_main`] or a second time.
+pub fn enter_cycle() {
+    let taken = CYCLE_SETTINGS.lock().ok().and_then(|mut g| g.take());
+    if let Some(cfg) = taken {
+        let mut g = rt::RtGuard::default();
+        rt::enter_cycle(&cfg, &mut g);
+        tracing::info!(
+            "entering the cycle: real-time settings applied: {:?}",
+            g.applied
+        );
+    }
+}
+
 /// Installs tracing (`RUST_LOG`, default `info`, to stderr), makes `ctrlc` the one owner
 /// of SIGINT/SIGTERM, asks for SIGTERM if the parent (the supervisor) dies, loads the
-/// config, applies its real-time settings (each falling back with one warning) and runs
-/// `service`. Returns the process exit code ([`exit_code`]).
+/// config, applies the real-time settings that precede set-up (PM QoS, timer slack,
+/// mlockall; each falling back with one warning), leaves CPU affinity and SCHED_FIFO to
+/// [`enter_cycle`], and runs `service`. Returns the process exit code ([`exit_code`]).
 pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -> ExitCode {
     init_tracing();
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
@@ -88,7 +110,10 @@ pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -
         // Lockstep runs as fast as the chain goes: no real-time priority for a busy loop.
         rt_cfg.sched_fifo_priority = 0;
     }
-    let rt = rt::apply(&rt_cfg);
+    let rt = rt::prepare(&rt_cfg);
+    if let Ok(mut g) = CYCLE_SETTINGS.lock() {
+        *g = Some(rt_cfg.clone());
+    }
     tracing::info!(
         "{} starting: instance `{}`, {} Hz{}, real-time settings applied: {:?}",
         role.name(),

@@ -30,21 +30,31 @@ fn errno() -> std::io::Error {
     std::io::Error::last_os_error()
 }
 
-/// Applies `cfg` to the calling process (and, for the scheduler, its current thread).
-pub fn apply(cfg: &RealtimeConfig) -> RtGuard {
-    let mut g = RtGuard::default();
-    let note = |ok: Result<(), String>, name: &'static str, g: &mut RtGuard| match ok {
+fn note(ok: Result<(), String>, name: &'static str, g: &mut RtGuard) {
+    match ok {
         Ok(()) => g.applied.push(name),
         Err(e) => {
             tracing::warn!("real-time setting `{name}` not applied, continuing without it: {e}");
             g.fallbacks.push(name);
         }
-    };
-
-    if !cfg.cpu_affinity.is_empty() {
-        let r = set_affinity(&cfg.cpu_affinity);
-        note(r, "cpu_affinity", &mut g);
     }
+}
+
+/// Applies `cfg` to the calling process (and, for the scheduler, its current thread):
+/// [`prepare`] and [`enter_cycle`] at once (a bare timer loop has nothing to set up).
+pub fn apply(cfg: &RealtimeConfig) -> RtGuard {
+    let mut g = prepare(cfg);
+    enter_cycle(cfg, &mut g);
+    g
+}
+
+/// The settings a service takes before it sets up: PM QoS, timer slack and mlockall
+/// (so everything it maps from here on is locked). Not the CPU and the scheduler: a
+/// (re)starting service sets up — loads its model, opens its ports, faults in and locks
+/// its shared memory, for milliseconds — as an ordinary task wherever the kernel puts it,
+/// and so never holds up the running pipeline's SCHED_FIFO stages on their CPU.
+pub fn prepare(cfg: &RealtimeConfig) -> RtGuard {
+    let mut g = RtGuard::default();
     if cfg.pm_qos {
         match File::options().write(true).open("/dev/cpu_dma_latency") {
             Ok(mut f) => {
@@ -102,6 +112,16 @@ pub fn apply(cfg: &RealtimeConfig) -> RtGuard {
             &mut g,
         );
     }
+    g
+}
+
+/// The settings for the cyclic loop, taken right before it starts: CPU affinity and
+/// SCHED_FIFO (recorded in `g`).
+pub fn enter_cycle(cfg: &RealtimeConfig, g: &mut RtGuard) {
+    if !cfg.cpu_affinity.is_empty() {
+        let r = set_affinity(&cfg.cpu_affinity);
+        note(r, "cpu_affinity", g);
+    }
     if cfg.sched_fifo_priority > 0 {
         let param = libc::sched_param {
             sched_priority: cfg.sched_fifo_priority as i32,
@@ -115,10 +135,9 @@ pub fn apply(cfg: &RealtimeConfig) -> RtGuard {
                 Err(format!("sched_setscheduler(SCHED_FIFO): {}", errno()))
             },
             "sched_fifo_priority",
-            &mut g,
+            g,
         );
     }
-    g
 }
 
 fn set_affinity(cpus: &[usize]) -> Result<(), String> {
