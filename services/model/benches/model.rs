@@ -15,7 +15,9 @@ use microrobot_model::{
     mass_matrix, rnea,
 };
 use std::hint::black_box;
-use std::path::Path;
+
+#[path = "../examples/common/mod.rs"]
+mod common;
 
 const STATES: usize = 64;
 
@@ -26,28 +28,9 @@ struct State {
 }
 
 fn states(robot: &Robot) -> Vec<State> {
-    let mut seed = 0x1234_5678_u64;
-    let mut next = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
-    (0..STATES)
-        .map(|_| {
-            let mut s = State {
-                q: JointVector::zeros(),
-                qd: JointVector::zeros(),
-                qdd: JointVector::zeros(),
-            };
-            for (i, j) in robot.joints().iter().enumerate() {
-                let l = &j.limits;
-                s.q[i] = l.min + next() * (l.max - l.min);
-                s.qd[i] = (2.0 * next() - 1.0) * l.velocity;
-                s.qdd[i] = (2.0 * next() - 1.0) * l.acceleration;
-            }
-            s
-        })
+    common::random_states(robot, STATES)
+        .into_iter()
+        .map(|[q, qd, qdd]| State { q, qd, qdd })
         .collect()
 }
 
@@ -128,11 +111,7 @@ impl Measurement for ThreadCpuTime {
 }
 
 fn benches<M: Measurement + 'static>(c: &mut Criterion<M>) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml");
-    let robot = match Robot::from_file(&path) {
-        Ok(r) => r,
-        Err(e) => panic!("{e}"),
-    };
+    let robot = common::seed_arm();
     let mut data = ModelData::new(&robot);
     let st = states(&robot);
     let mut k = 0usize;

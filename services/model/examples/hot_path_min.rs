@@ -4,42 +4,18 @@
 //! Run: `cargo run --release -p microrobot-model --example hot_path_min`.
 
 use microrobot_model::{
-    JointVector, ModelData, Robot, forward_dynamics, forward_kinematics, jacobian, lagrange_euler,
+    JointVector, ModelData, forward_dynamics, forward_kinematics, jacobian, lagrange_euler,
     mass_matrix, rnea,
 };
 use std::hint::black_box;
+
+mod common;
 use std::time::Instant;
 
 fn main() {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml");
-    let robot = match Robot::from_file(&path) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("{e}");
-            std::process::exit(1);
-        }
-    };
+    let robot = common::seed_arm();
     let mut data = ModelData::new(&robot);
-    let mut seed = 0x1234_5678_u64;
-    let mut next = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let states: Vec<[JointVector; 3]> = (0..64)
-        .map(|_| {
-            let mut s = [JointVector::zeros(); 3];
-            for (i, j) in robot.joints().iter().enumerate() {
-                let l = &j.limits;
-                s[0][i] = l.min + next() * (l.max - l.min);
-                s[1][i] = (2.0 * next() - 1.0) * l.velocity;
-                s[2][i] = (2.0 * next() - 1.0) * l.acceleration;
-            }
-            s
-        })
-        .collect();
+    let states = common::random_states(&robot, 64);
     let report =
         |name: &str, batches: usize, calls: usize, f: &mut dyn FnMut(&[JointVector; 3])| {
             let mut best = f64::INFINITY;

@@ -14,10 +14,12 @@
 //! ```
 
 use microrobot_model::{
-    JointVector, ModelData, Robot, forward_dynamics, forward_kinematics, jacobian, lagrange_euler,
+    JointVector, ModelData, forward_dynamics, forward_kinematics, jacobian, lagrange_euler,
     mass_matrix, rnea,
 };
 use std::hint::black_box;
+
+mod common;
 
 /// One call of an algorithm on a state `[q, qd, qdd]`.
 type Call<'a> = Box<dyn FnMut(&[JointVector; 3]) + 'a>;
@@ -33,35 +35,9 @@ fn main() {
         );
         std::process::exit(2);
     };
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml");
-    let robot = match Robot::from_file(&path) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("{e}");
-            std::process::exit(1);
-        }
-    };
+    let robot = common::seed_arm();
     let mut data = ModelData::new(&robot);
-    let mut seed = 0x1234_5678_u64;
-    let mut next = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let states: Vec<[JointVector; 3]> = (0..64)
-        .map(|_| {
-            let mut s = [JointVector::zeros(); 3];
-            for (i, j) in robot.joints().iter().enumerate() {
-                let l = &j.limits;
-                s[0][i] = l.min + next() * (l.max - l.min);
-                s[1][i] = (2.0 * next() - 1.0) * l.velocity;
-                s[2][i] = (2.0 * next() - 1.0) * l.acceleration;
-            }
-            s
-        })
-        .collect();
+    let states = common::random_states(&robot, 64);
     let mut run: Call = match algo.as_str() {
         "fk" => Box::new(|s| {
             black_box(forward_kinematics(&robot, &mut data, &s[0]));
