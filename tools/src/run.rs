@@ -69,7 +69,7 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
     /// Run a bare timer loop alongside, at the same rate with the same real-time settings
-    /// (the machine's timer floor), and report the planner's lateness and misses against
+    /// and overrun policy (the machine's timer floor), and report the planner's lateness and misses against
     /// it in the summary (`floor`). It shares the services' CPU, so it costs them a little.
     #[arg(long)]
     pub floor_probe: bool,
@@ -198,7 +198,12 @@ impl Hooks for FloorProbe {
             .spawn(move || {
                 let _guard = microrobot_runtime::rt::apply(&rt);
                 // At most a day; `finish` ends it with the run.
-                microrobot_runtime::timer::floor_probe_until(period, 86_400_000_000_000, &stop)
+                microrobot_runtime::timer::floor_probe_until(
+                    period,
+                    86_400_000_000_000,
+                    rt.overrun,
+                    &stop,
+                )
             })
             .ok();
     }

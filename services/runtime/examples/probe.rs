@@ -14,7 +14,11 @@ fn main() -> anyhow::Result<()> {
         let secs: f64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(10.0);
         let cfg = microrobot_runtime::PipelineConfig::default();
         let _rt = microrobot_runtime::rt::apply(&cfg.realtime);
-        let r = microrobot_runtime::timer::floor_probe((1e9 / rate) as u64, (secs * 1e9) as u64)?;
+        let r = microrobot_runtime::timer::floor_probe(
+            (1e9 / rate) as u64,
+            (secs * 1e9) as u64,
+            cfg.realtime.overrun,
+        )?;
         println!(
             "floor {rate} Hz {secs} s: ticks {} misses {} lateness p50/p99/p99.9/max = {}/{}/{}/{} us",
             r.ticks,

@@ -195,12 +195,19 @@ pub struct FloorReport {
 
 /// The machine's timer floor: a bare timerfd loop at `period_ns` for `duration_ns`, with
 /// the same settings as the pipeline (apply [`crate::rt::apply`] first in the same
-/// thread). Lateness and misses are defined exactly as for the planner, so the planner's
-/// figures compare against it.
-pub fn floor_probe(period_ns: u64, duration_ns: u64) -> std::io::Result<FloorReport> {
+/// thread) and the planner's overrun policy. Lateness and misses are defined exactly as
+/// for the planner, so the planner's figures compare against it. (With `Skip` the ticks
+/// a stall swallowed are not recorded, so no lateness exceeds a period; with `CatchUp`
+/// each one is, as the planner records them: the two distributions differ in their tail.)
+pub fn floor_probe(
+    period_ns: u64,
+    duration_ns: u64,
+    overrun: OverrunPolicy,
+) -> std::io::Result<FloorReport> {
     floor_probe_until(
         period_ns,
         duration_ns,
+        overrun,
         &std::sync::atomic::AtomicBool::new(false),
     )
 }
@@ -210,10 +217,11 @@ pub fn floor_probe(period_ns: u64, duration_ns: u64) -> std::io::Result<FloorRep
 pub fn floor_probe_until(
     period_ns: u64,
     duration_ns: u64,
+    overrun: OverrunPolicy,
     stop: &std::sync::atomic::AtomicBool,
 ) -> std::io::Result<FloorReport> {
     let mut hist = crate::stats::LatencyHistogram::new();
-    let mut clock = PeriodicClock::start(period_ns, OverrunPolicy::Skip)?;
+    let mut clock = PeriodicClock::start(period_ns, overrun)?;
     let end = monotonic_ns() + duration_ns;
     let mut ticks = 0;
     // SAFETY: the fd stays owned by `clock` for the whole loop.

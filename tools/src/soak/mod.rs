@@ -408,7 +408,7 @@ impl Soak {
             .name("soak-floor".into())
             .spawn(move || {
                 let _guard = microrobot_runtime::rt::apply(&rt);
-                floor_probe(period, duration)
+                floor_probe(period, duration, rt.overrun)
             })
             .ok();
         if self.args.cpu_load > 0 {
