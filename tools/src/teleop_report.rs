@@ -396,16 +396,7 @@ pub fn main(args: TeleopReportArgs) -> anyhow::Result<()> {
     set_log_level_from_env_or(LogLevel::Error);
     let inst = args.instance.as_str();
     let node_name = format!("microrobot-teleop-report.{inst}.{}", std::process::id());
-    let node = NodeBuilder::new()
-        .name(
-            &node_name
-                .as_str()
-                .try_into()
-                .map_err(|e| anyhow::anyhow!("invalid node name `{node_name}`: {e:?}"))?,
-        )
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+    let node = microrobot_runtime::node::named_node(&node_name)?;
     let ms = subscriber::<MasterPose>(&node, inst, ServiceKind::Master)?;
     let ss = subscriber::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?;
     let st = subscriber::<JointState>(&node, inst, ServiceKind::State)?;

@@ -316,16 +316,7 @@ pub fn main(args: TeleopSourceArgs) -> anyhow::Result<()> {
         .context("cannot install the SIGINT/SIGTERM handler")?;
     let inst = args.instance.as_str();
     let node_name = format!("microrobot-teleop-source.{inst}.{}", std::process::id());
-    let node = NodeBuilder::new()
-        .name(
-            &node_name
-                .as_str()
-                .try_into()
-                .map_err(|e| anyhow::anyhow!("invalid node name `{node_name}`: {e:?}"))?,
-        )
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node `{node_name}`: {e:?}"))?;
+    let node = microrobot_runtime::node::named_node(&node_name)?;
     let publisher = open_publish_subscribe::<MasterPose>(&node, inst, ServiceKind::Master)?
         .publisher_builder()
         .create()

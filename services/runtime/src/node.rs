@@ -61,8 +61,14 @@ pub fn open_named_node(instance: &str, role: &'static str) -> anyhow::Result<Nod
         }
         .into());
     }
+    named_node(&name)
+}
+
+/// A node named `name` with iceoryx2's signal handling disabled, without the
+/// one-per-instance check of [`open_node`]: for tools (recorder, monitors, stand-ins)
+/// that may run several at a time.
+pub fn named_node(name: &str) -> anyhow::Result<Node<ipc::Service>> {
     let node_name: NodeName = name
-        .as_str()
         .try_into()
         .map_err(|e| anyhow::anyhow!("invalid node name `{name}`: {e:?}"))?;
     NodeBuilder::new()

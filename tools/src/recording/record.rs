@@ -311,16 +311,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
 
     let inst = args.instance.as_str();
     let node_name = format!("microrobot-record.{inst}.{}", std::process::id());
-    let node = NodeBuilder::new()
-        .name(
-            &node_name
-                .as_str()
-                .try_into()
-                .map_err(|e| anyhow!("invalid node name `{node_name}`: {e:?}"))?,
-        )
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
-        .map_err(|e| anyhow!("cannot create iceoryx2 node `{node_name}`: {e:?}"))?;
+    let node = microrobot_runtime::node::named_node(&node_name)?;
 
     let writer = Writer::create(&args)?;
     let sp = subscriber::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?;

@@ -110,15 +110,7 @@ pub struct CommandPort {
 impl CommandPort {
     pub fn open(instance: &str) -> anyhow::Result<Self> {
         let node_name = format!("microrobot-soak.{instance}");
-        let name: NodeName = node_name
-            .as_str()
-            .try_into()
-            .map_err(|e| anyhow::anyhow!("node name {node_name}: {e:?}"))?;
-        let node = NodeBuilder::new()
-            .name(&name)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+        let node = microrobot_runtime::node::named_node(&node_name)?;
         let publisher =
             open_publish_subscribe::<MotionCommand>(&node, instance, ServiceKind::Command)?
                 .publisher_builder()

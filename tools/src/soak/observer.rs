@@ -136,15 +136,7 @@ impl Observer {
             .spawn(move || {
                 let node_name = format!("microrobot-soak-observer.{inst}");
                 let setup = (|| -> anyhow::Result<_> {
-                    let name: NodeName = node_name
-                        .as_str()
-                        .try_into()
-                        .map_err(|e| anyhow::anyhow!("node name {node_name}: {e:?}"))?;
-                    let node = NodeBuilder::new()
-                        .name(&name)
-                        .signal_handling_mode(SignalHandlingMode::Disabled)
-                        .create::<ipc::Service>()
-                        .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+                    let node = microrobot_runtime::node::named_node(&node_name)?;
                     let sp = subscriber::<JointSetpoint>(&node, &inst, ServiceKind::Setpoint)?;
                     let tq = subscriber::<TorqueCommand>(&node, &inst, ServiceKind::Torque)?;
                     let st = subscriber::<JointState>(&node, &inst, ServiceKind::State)?;

@@ -45,14 +45,7 @@ pub struct StatusMonitor {
 impl StatusMonitor {
     /// Subscribes to the status stream of `instance` with a node named `node_name`.
     pub fn open(instance: &str, node_name: &str) -> anyhow::Result<Self> {
-        let name: NodeName = node_name
-            .try_into()
-            .map_err(|e| anyhow::anyhow!("invalid node name `{node_name}`: {e:?}"))?;
-        let node = NodeBuilder::new()
-            .name(&name)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .map_err(|e| anyhow::anyhow!("cannot create iceoryx2 node: {e:?}"))?;
+        let node = microrobot_runtime::node::named_node(node_name)?;
         Self::with_node(node, instance)
     }
 
