@@ -174,11 +174,7 @@ impl FloorProbe {
 
 impl Hooks for FloorProbe {
     fn before_start(&mut self, cfg: &PipelineConfig) -> anyhow::Result<()> {
-        let mut rt = cfg.realtime.clone();
-        if cfg.lockstep {
-            // Lockstep services run without SCHED_FIFO; so does their floor.
-            rt.sched_fifo_priority = 0;
-        }
+        let mut rt = cfg.service_realtime();
         // The supervisor's memory need not be locked for a timer loop.
         rt.mlockall = false;
         self.settings = Some((rt, cfg.period_ns()));

@@ -541,7 +541,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     status.publish(monotonic_ns(), &mut st);
 
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
-    microrobot_runtime::enter_cycle();
+    microrobot_runtime::enter_cycle(cfg);
     while !shutdown.is_requested() {
         let mut fired = [false; 4];
         ws.wait_and_process_once(|id| {

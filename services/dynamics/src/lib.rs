@@ -395,7 +395,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let mut input_stale_periods = 0u64;
 
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
-    microrobot_runtime::enter_cycle();
+    microrobot_runtime::enter_cycle(cfg);
     while !shutdown.is_requested() {
         let mut fired = [false; 3];
         ws.wait_and_process_once(|id| {

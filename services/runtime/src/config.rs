@@ -355,6 +355,17 @@ impl PipelineConfig {
         self.lockstep || self.planner.clock == PlannerClock::ActuatorState
     }
 
+    /// The real-time settings a service of this config runs with: `[realtime]`, without
+    /// SCHED_FIFO in lockstep (the chain free-wheels there; a FIFO busy chain would starve
+    /// the machine). The floor probes use the same, so they measure what the services get.
+    pub fn service_realtime(&self) -> RealtimeConfig {
+        let mut rt = self.realtime.clone();
+        if self.lockstep {
+            rt.sched_fifo_priority = 0;
+        }
+        rt
+    }
+
     /// Serialises the (validated) config back to TOML with absolute paths, so the text
     /// is self-contained: `from_toml_str(to_toml_string())` gives the same config.
     pub fn to_toml_string(&self) -> String {

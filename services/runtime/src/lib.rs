@@ -50,25 +50,18 @@ pub type ServiceFn = fn(&PipelineConfig, &Shutdown) -> anyhow::Result<()>;
 #[error("{0}")]
 pub struct BadConfig(pub String);
 
-/// The cyclic settings [`enter_cycle`] applies (set by [`service_main`]).
-static CYCLE_SETTINGS: std::sync::Mutex<Option<config::RealtimeConfig>> =
-    std::sync::Mutex::new(None);
-
 /// Called by a service right before its cyclic loop: pins it to its CPUs and makes it
-/// SCHED_FIFO (each falling back with one warning), once. Everything before — loading
-/// the model, opening ports, locking memory, waiting for the first state — ran as an
-/// ordinary task, so a restarting service never holds up the running pipeline's
-/// real-time stages on their CPU. Does nothing outside [`service_main`] or a second time.
-pub fn enter_cycle() {
-    let taken = CYCLE_SETTINGS.lock().ok().and_then(|mut g| g.take());
-    if let Some(cfg) = taken {
-        let mut g = rt::RtGuard::default();
-        rt::enter_cycle(&cfg, &mut g);
-        tracing::info!(
-            "entering the cycle: real-time settings applied: {:?}",
-            g.applied
-        );
-    }
+/// SCHED_FIFO (each falling back with one warning), as `cfg` says
+/// ([`PipelineConfig::service_realtime`]). Everything before — loading the model, opening
+/// ports, locking memory, waiting for the first state — ran as an ordinary task, so a
+/// restarting service never holds up the running pipeline's real-time stages on their CPU.
+pub fn enter_cycle(cfg: &PipelineConfig) {
+    let mut g = rt::RtGuard::default();
+    rt::enter_cycle(&cfg.service_realtime(), &mut g);
+    tracing::info!(
+        "entering the cycle: real-time settings applied: {:?}",
+        g.applied
+    );
 }
 
 /// Installs tracing (`RUST_LOG`, default `info`, to stderr), makes `ctrlc` the one owner
@@ -105,15 +98,7 @@ pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -
             return ExitCode::from(exit_code::BAD_CONFIG);
         }
     };
-    let mut rt_cfg = cfg.realtime.clone();
-    if cfg.lockstep {
-        // Lockstep runs as fast as the chain goes: no real-time priority for a busy loop.
-        rt_cfg.sched_fifo_priority = 0;
-    }
-    let rt = rt::prepare(&rt_cfg);
-    if let Ok(mut g) = CYCLE_SETTINGS.lock() {
-        *g = Some(rt_cfg.clone());
-    }
+    let rt = rt::prepare(&cfg.service_realtime());
     tracing::info!(
         "{} starting: instance `{}`, {} Hz{}, real-time settings applied: {:?}",
         role.name(),

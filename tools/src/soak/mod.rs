@@ -235,7 +235,7 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
         cfg.actuator.sim.sensor_noise_rad,
         cfg.actuator.sim.sensor_noise_rad_s,
     );
-    let mut realtime = cfg.realtime.clone();
+    let mut realtime = cfg.service_realtime();
     // The probe shares the pipeline's policy, affinity, PM QoS and slack; locking the
     // soak process's memory would not change a timer's wake-up.
     realtime.mlockall = false;
