@@ -334,6 +334,19 @@ impl TeleopController {
                 self.hold_point
             }
         };
+        if !self.engaged {
+            // Disengaged: the joints stop and hold at `q_target` (set on release or at
+            // restart); nothing the hand does moves them, and no Cartesian limit,
+            // singularity measure or IK is needed for that.
+            self.last_desired = desired;
+            let sample = *self.tracker.step(&self.q_target, &JointVector::zeros());
+            return TeleopStep {
+                sample,
+                flags: f,
+                tool_command: self.limiter.position,
+                tool_desired: desired,
+            };
+        }
 
         // Slow down near singularities.
         let q_now = self.tracker.state().q;
@@ -359,17 +372,6 @@ impl TeleopController {
         let mut moving_target = false;
 
         let target = IkTarget::Position(self.limiter.position);
-        if !self.engaged {
-            // Disengaged: the joints stop and hold at `q_target` (set on release or at
-            // restart); nothing the hand does moves them.
-            let sample = *self.tracker.step(&self.q_target, &JointVector::zeros());
-            return TeleopStep {
-                sample,
-                flags: f,
-                tool_command: self.limiter.position,
-                tool_desired: desired,
-            };
-        }
         match solve_local(
             &self.robot,
             &mut self.data,
