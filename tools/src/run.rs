@@ -167,7 +167,10 @@ impl FloorProbe {
                 eprintln!("warning: the floor probe failed: {e}");
                 None
             }
-            Err(_) => None,
+            Err(_) => {
+                eprintln!("warning: the floor probe's thread panicked; no floor reported");
+                None
+            }
         }
     }
 }
@@ -201,6 +204,7 @@ impl Hooks for FloorProbe {
                     &stop,
                 )
             })
+            .map_err(|e| eprintln!("warning: cannot start the floor probe: {e}; no floor reported"))
             .ok();
     }
 }
