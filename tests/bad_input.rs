@@ -5,9 +5,11 @@
 //! (`last_command_refusal` / `last_input_refusal`), produces no output of its own, and
 //! the arm does not move (measured q unchanged).
 //!
-//! Sequence numbers: a stage tracks them per publisher, so duplicates and reordering are
-//! refused within one publisher's stream (unit-tested in `microrobot_runtime::validate`);
-//! an injected message is refused on its content before its sequence number is looked at.
+//! Sequence numbers: a stage follows one publisher per stream, so duplicates and
+//! reordering are refused within its stream (unit-tested in `microrobot_runtime::validate`);
+//! an injected message is refused on its content before its publisher and sequence number
+//! are looked at. A well-formed, fresh message from the test's own (second) publisher is
+//! refused as such while the pipeline's publisher of that stream is live.
 
 mod common;
 
@@ -298,6 +300,12 @@ fn every_bad_input_class_is_refused_named_counted_and_moves_nothing() {
             sp.send(m)
         },
     );
+    expect(
+        Dynamics,
+        "setpoint: well-formed, from a second publisher",
+        R::SecondPublisher,
+        &|| sp.send(good_setpoint()),
+    );
     // Torques → actuator.
     expect(Actuator, "torque: infinity", R::NonFinite, &|| {
         let mut m = good_torque();
@@ -314,6 +322,13 @@ fn every_bad_input_class_is_refused_named_counted_and_moves_nothing() {
         m.header.stamp_ns -= 5_000_000_000;
         tq.send(m)
     });
+    // Zero torque would let the arm sag under gravity: it must not be applied.
+    expect(
+        Actuator,
+        "torque: well-formed, from a second publisher",
+        R::SecondPublisher,
+        &|| tq.send(good_torque()),
+    );
     // States → planner and dynamics (both subscribe; both refuse).
     for (class, reason, m) in [
         ("state: NaN", R::NonFinite, {
@@ -326,6 +341,11 @@ fn every_bad_input_class_is_refused_named_counted_and_moves_nothing() {
             m.dof = 0;
             m
         }),
+        (
+            "state: well-formed, from a second publisher",
+            R::SecondPublisher,
+            good_state(),
+        ),
     ] {
         let base_p = statuses.wait(Planner, "a status", |_| true);
         let base_d = statuses.wait(Dynamics, "a status", |_| true);

@@ -291,3 +291,51 @@ fn free_running_run_reports_the_timer_floor_and_cpu_shares() {
     );
     assert!(summary(&without)["floor"].is_null());
 }
+
+/// `microrobot probe-chain`: three bare processes with the pipeline's hops report the
+/// end-to-end latency of every setpoint that came through (or count it lost), the
+/// source's lateness per tick, and CPU per link. Figures are reported, not asserted.
+#[test]
+fn chain_probe_accounts_for_every_tick_and_reports_cpu_per_link() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("chain");
+    let cfg = write_config(dir.path(), &inst, "", "");
+    let json = dir.path().join("chain.json");
+    let out = run(
+        &[
+            "probe-chain",
+            "--config",
+            cfg.to_str().expect("utf-8"),
+            "--rate-hz",
+            "500",
+            "--duration",
+            "2s",
+            "--json",
+            json.to_str().expect("utf-8"),
+        ],
+        120.0,
+    );
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    assert!(out.stdout.contains("end-to-end"), "{}", out.stdout);
+    let r = summary(&json);
+    let ticks = r["source_lateness_us"]["count"].as_u64().expect("ticks");
+    assert_eq!(ticks, 1000, "500 Hz for 2 s: {r}");
+    let links = r["links"].as_array().expect("links");
+    let sink = links.iter().find(|l| l["link"] == "sink").expect("sink");
+    let received = r["e2e_latency_us"]["count"].as_u64().expect("received");
+    let lost = sink["lost_messages"].as_u64().expect("lost");
+    // Every setpoint either reached the sink or is counted lost (the last one can only
+    // go missing unseen).
+    assert!(
+        received + lost <= ticks && received + lost + 1 >= ticks && received > ticks / 2,
+        "{received} received + {lost} lost of {ticks}: {r}"
+    );
+    let p = &r["e2e_latency_us"];
+    assert!(p["p50"].as_f64() <= p["p99"].as_f64() && p["p99"].as_f64() <= p["max"].as_f64());
+    for l in links {
+        assert!(l["cpu_s"].as_f64().expect("cpu") > 0.0, "{l}");
+        assert!(l["wakes"].as_u64().expect("wakes") > 0, "{l}");
+    }
+    let total = r["cpu_percent_total"].as_f64().expect("total");
+    assert!(total > 0.0, "{r}");
+}

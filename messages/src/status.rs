@@ -87,6 +87,7 @@ pub enum RefusalReason {
     OutOfOrder = 16,
     TeleopUnavailable = 17,
     TeleopNotAtRest = 18,
+    SecondPublisher = 19,
 }
 
 impl RefusalReason {
@@ -113,6 +114,7 @@ impl RefusalReason {
             16 => OutOfOrder,
             17 => TeleopUnavailable,
             18 => TeleopNotAtRest,
+            19 => SecondPublisher,
             _ => return Option::None,
         })
     }
@@ -144,6 +146,9 @@ impl RefusalReason {
             }
             Self::TeleopNotAtRest => {
                 "teleop is entered at rest only; stop the running motion first"
+            }
+            Self::SecondPublisher => {
+                "from a second publisher while the stream's own publisher is live"
             }
         }
     }

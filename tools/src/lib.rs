@@ -2,6 +2,7 @@
 
 pub mod eval_model;
 pub mod eval_trajectory;
+pub mod probe_chain;
 pub mod recording;
 pub mod run;
 pub mod send;

@@ -10,7 +10,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, replay};
 use microrobot_cli::{
-    eval_model, eval_trajectory, run, send, service, soak, study, teleop_report, teleop_source, top,
+    eval_model, eval_trajectory, probe_chain, run, send, service, soak, study, teleop_report,
+    teleop_source, top,
 };
 
 #[derive(Parser)]
@@ -30,6 +31,9 @@ enum Command {
     Run(run::RunArgs),
     /// Run the pipeline for minutes to hours with injected faults and write a soak report.
     Soak(soak::SoakArgs),
+    /// Measure the machine's floor for the pipeline's latency and CPU: three bare processes
+    /// with the pipeline's bus hops and real-time settings, and no work.
+    ProbeChain(probe_chain::ProbeChainArgs),
     /// Send a motion command (move, stop, estop, reset) to a running pipeline.
     Send(send::SendArgs),
     /// Show live rates, latencies and health of a running pipeline.
@@ -76,6 +80,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => return run::main(args),
         Command::Soak(args) => return soak::main(args),
+        Command::ProbeChain(args) => probe_chain::main(args),
         Command::Send(args) => send::main(args),
         Command::Top(args) => top::main(args),
         Command::TeleopSource(args) => teleop_source::main(args),

@@ -20,7 +20,6 @@ pub mod sim;
 
 use anyhow::Context as _;
 use iceoryx2::port::update_connections::UpdateConnections;
-use iceoryx2::prelude::*;
 use microrobot_messages::{
     CommandKind, Header, JointSetpoint, JointState, LifecycleState, MAX_JOINTS, MotionCommand,
     ServiceKind, ServiceRole, ServiceStatus, TorqueCommand, monotonic_ns, open_event,
@@ -31,7 +30,7 @@ use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::{Refusal, SeqTracker, check_fresh, check_torque};
 use microrobot_runtime::watchdog::{Freshness, Watchdog};
-use microrobot_runtime::{BadConfig, PeriodicClock, Shutdown, StatusPort, open_node, waitset};
+use microrobot_runtime::{BadConfig, PeriodicClock, Reactor, Shutdown, StatusPort, open_node};
 
 pub use backend::{ActuatorBackend, BackendError, Measured};
 pub use resume::{RESUME_ENV, ResumeState};
@@ -116,7 +115,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             auto_resume: cfg.watchdog.auto_resume,
             stale_ns: (cfg.watchdog.stale_ms * 1e6) as u64,
             watchdog: Watchdog::new(cfg.watchdog.stale_ms, cfg.watchdog.fault_ms),
-            seq: SeqTracker::default(),
+            seq: SeqTracker::new((cfg.watchdog.stale_ms * 1e6) as u64),
             latest: None,
             latest_unapplied: false,
             steps_on_latest: 0,
@@ -177,7 +176,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                     check_fresh(msg.header.stamp_ns, now_ns, self.stale_ns)
                 }
             })
-            .and_then(|()| self.seq.accept(publisher, msg.header.seq));
+            .and_then(|()| self.seq.accept(publisher, msg.header.seq, now_ns));
         match r {
             Ok(()) => {
                 self.latest = Some(*msg);
@@ -486,19 +485,11 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
 
     let PeriodicClock { timer, mut ticker } =
         PeriodicClock::start(cfg.period_ns(), cfg.realtime.overrun)?;
-    let ws = waitset()?;
-    let g_torque = ws
-        .attach_notification(&torque_listener)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let g_cmd = ws
-        .attach_notification(&cmd_listener)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let g_timer = ws
-        .attach_notification(&timer)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    let g_stop = ws
-        .attach_notification(shutdown)
-        .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+    let mut reactor = Reactor::new().context("epoll")?;
+    let on_torque = reactor.add(&torque_listener).context("epoll")?;
+    let on_command = reactor.add(&cmd_listener).context("epoll")?;
+    let on_timer = reactor.add(&timer).context("epoll")?;
+    let on_stop = reactor.add(shutdown).context("epoll")?;
 
     // Free-running with the planner on its own timer, the plant steps are phased half a
     // period after the planner's ticks (below). When the planner ticks on states, this
@@ -543,19 +534,11 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
     microrobot_runtime::enter_cycle(cfg);
     while !shutdown.is_requested() {
-        let mut fired = [false; 4];
-        ws.wait_and_process_once(|id| {
-            fired[0] |= id.has_event_from(&g_torque);
-            fired[1] |= id.has_event_from(&g_cmd);
-            fired[2] |= id.has_event_from(&g_timer);
-            fired[3] |= id.has_event_from(&g_stop);
-            CallbackProgression::Continue
-        })
-        .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
-        if fired[3] || shutdown.is_requested() {
+        let ready = reactor.wait().context("epoll_wait")?;
+        if ready.contains(on_stop) || shutdown.is_requested() {
             break;
         }
-        if fired[0] {
+        if ready.contains(on_torque) {
             let _ = torque_listener.try_wait(|_| {});
             while let Ok(Some(sample)) = torque_sub.receive() {
                 let msg = *sample;
@@ -590,7 +573,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         // Drained on every wake-up (see the planner: a new sender's sample can become
         // visible after its notification).
         {
-            if fired[1] {
+            if ready.contains(on_command) {
                 let _ = cmd_listener.try_wait(|_| {});
             }
             while let Ok(Some(sample)) = cmd_sub.receive() {
@@ -601,7 +584,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 }
             }
         }
-        if fired[2] {
+        if ready.contains(on_timer) {
             ticker.on_expirations(timer.read_expirations());
             // Hands the last state (history 1) to subscribers that joined since the last
             // send: in lockstep nothing is sent until the first torque, and the planner

@@ -23,7 +23,7 @@
 //! joint limits) and refused ones are counted; no torque is published for them.
 //! The computation lives in [`DynamicsCore`] (no IPC).
 
-use iceoryx2::prelude::*;
+use anyhow::Context as _;
 use microrobot_messages::{
     Header, JointSetpoint, JointState, LifecycleState, MAX_JOINTS, ServiceKind, ServiceRole,
     ServiceStatus, TorqueCommand, monotonic_ns, open_event, open_publish_subscribe, torque_flags,
@@ -34,7 +34,7 @@ use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::{
     JointBounds, Refusal, SeqTracker, check_fresh, check_setpoint, check_state,
 };
-use microrobot_runtime::{BadConfig, Shutdown, StatusPort, TimerFd, open_node, waitset};
+use microrobot_runtime::{BadConfig, Reactor, Shutdown, StatusPort, TimerFd, open_node};
 
 /// Cumulative counters of the dynamics service.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -119,8 +119,8 @@ impl DynamicsCore {
             slew_per_tick,
             last_torque: None,
             bounds,
-            sp_seq: SeqTracker::default(),
-            st_seq: SeqTracker::default(),
+            sp_seq: SeqTracker::new((cfg.watchdog.stale_ms * 1e6) as u64),
+            st_seq: SeqTracker::new((cfg.watchdog.stale_ms * 1e6) as u64),
             state: None,
             torque_seq: 0,
             last_tick_value: None,
@@ -146,10 +146,16 @@ impl DynamicsCore {
         self.state.map(|s| s.header.tick)
     }
 
-    /// Validates a measured state and keeps it as the newest.
-    pub fn accept_state(&mut self, msg: &JointState, publisher: u128) -> Result<(), Refusal> {
-        let r =
-            check_state(msg, self.dof).and_then(|()| self.st_seq.accept(publisher, msg.header.seq));
+    /// Validates a measured state (from `publisher`, received at `now_ns`) and keeps it
+    /// as the newest.
+    pub fn accept_state(
+        &mut self,
+        msg: &JointState,
+        publisher: u128,
+        now_ns: u64,
+    ) -> Result<(), Refusal> {
+        let r = check_state(msg, self.dof)
+            .and_then(|()| self.st_seq.accept(publisher, msg.header.seq, now_ns));
         match r {
             Ok(()) => {
                 self.state = Some(*msg);
@@ -191,7 +197,7 @@ impl DynamicsCore {
                     check_fresh(sp.header.stamp_ns, now_ns, self.stale_ns)
                 }
             })
-            .and_then(|()| self.sp_seq.accept(publisher, sp.header.seq));
+            .and_then(|()| self.sp_seq.accept(publisher, sp.header.seq, now_ns));
         if let Err(e) = r {
             self.counters.refused += 1;
             self.last_refusal = Some(e);
@@ -355,16 +361,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let sp_ns = status.period_ns();
     timer.arm_absolute(monotonic_ns() + sp_ns, sp_ns)?;
 
-    let ws = waitset()?;
-    let g_sp = ws
-        .attach_notification(&sp_listener)
-        .map_err(|e| err("waitset")(&e))?;
-    let g_timer = ws
-        .attach_notification(&timer)
-        .map_err(|e| err("waitset")(&e))?;
-    let g_stop = ws
-        .attach_notification(shutdown)
-        .map_err(|e| err("waitset")(&e))?;
+    let mut reactor = Reactor::new().context("epoll")?;
+    let on_setpoint = reactor.add(&sp_listener).context("epoll")?;
+    let on_timer = reactor.add(&timer).context("epoll")?;
+    let on_stop = reactor.add(shutdown).context("epoll")?;
 
     let mut st = ServiceStatus {
         ready: 1,
@@ -397,24 +397,17 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
     microrobot_runtime::enter_cycle(cfg);
     while !shutdown.is_requested() {
-        let mut fired = [false; 3];
-        ws.wait_and_process_once(|id| {
-            fired[0] |= id.has_event_from(&g_sp);
-            fired[1] |= id.has_event_from(&g_timer);
-            fired[2] |= id.has_event_from(&g_stop);
-            CallbackProgression::Continue
-        })
-        .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
-        if fired[2] || shutdown.is_requested() {
+        let ready = reactor.wait().context("epoll_wait")?;
+        if ready.contains(on_stop) || shutdown.is_requested() {
             break;
         }
-        if fired[0] {
+        if ready.contains(on_setpoint) {
             let _ = sp_listener.try_wait(|_| {});
             while let Ok(Some(s)) = st_sub.receive() {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
-                let _ = core.accept_state(&msg, publisher);
+                let _ = core.accept_state(&msg, publisher, monotonic_ns());
             }
             while let Ok(Some(s)) = sp_sub.receive() {
                 let msg = *s;
@@ -433,7 +426,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                                 let m = *s;
                                 let p = s.header().publisher_id().value();
                                 drop(s);
-                                let _ = core.accept_state(&m, p);
+                                let _ = core.accept_state(&m, p, monotonic_ns());
                             }
                             _ => std::thread::yield_now(),
                         }
@@ -454,14 +447,14 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 }
             }
         }
-        if fired[1] {
+        if ready.contains(on_timer) {
             let _ = timer.read_expirations();
             // Keep the state queue short even when no setpoint arrives.
             while let Ok(Some(s)) = st_sub.receive() {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
-                let _ = core.accept_state(&msg, publisher);
+                let _ = core.accept_state(&msg, publisher, monotonic_ns());
             }
             let now = monotonic_ns();
             if !cfg.lockstep

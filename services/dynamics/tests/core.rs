@@ -56,7 +56,7 @@ fn on_the_setpoint_at_rest_feedback_equals_inverse_dynamics() {
     let robot = Robot::from_file(&c.robot).unwrap();
     let mut d = DynamicsCore::new(&robot, &c);
     let now = 1000 * MS;
-    d.accept_state(&state(1, 0, now, Q), 9).unwrap();
+    d.accept_state(&state(1, 0, now, Q), 9, 0).unwrap();
     let t = d.compute(&sp(1, now, Q, [0.0; 6]), 1, now).unwrap();
     assert_ne!(t.flags & torque_flags::FEEDBACK, 0);
     let q = JointVector::from_column_slice(&[Q[0], Q[1], Q[2], Q[3], Q[4], Q[5], 0.0, 0.0]);
@@ -80,7 +80,8 @@ fn stale_state_gives_flagged_feed_forward() {
     let robot = Robot::from_file(&c.robot).unwrap();
     let mut d = DynamicsCore::new(&robot, &c);
     let now = 1000 * MS;
-    d.accept_state(&state(1, 0, now - 60 * MS, Q), 9).unwrap();
+    d.accept_state(&state(1, 0, now - 60 * MS, Q), 9, 0)
+        .unwrap();
     let t = d.compute(&sp(1, now, Q, [0.0; 6]), 1, now).unwrap();
     assert_ne!(t.flags & torque_flags::STATE_STALE, 0);
     assert_eq!(t.state_seq, u64::MAX);
@@ -92,7 +93,7 @@ fn lockstep_uses_only_state_k_minus_1() {
     let c = cfg(true);
     let robot = Robot::from_file(&c.robot).unwrap();
     let mut d = DynamicsCore::new(&robot, &c);
-    d.accept_state(&state(1, 4, 0, Q), 9).unwrap();
+    d.accept_state(&state(1, 4, 0, Q), 9, 0).unwrap();
     let t = d.compute(&sp(5, 0, Q, [0.0; 6]), 1, 0).unwrap();
     assert_ne!(t.flags & torque_flags::FEEDBACK, 0);
     let t = d.compute(&sp(7, 0, Q, [0.0; 6]), 1, 0).unwrap();
@@ -109,7 +110,7 @@ fn torques_beyond_the_effort_limit_are_clamped_and_flagged() {
     let robot = Robot::from_file(&c.robot).unwrap();
     let mut d = DynamicsCore::new(&robot, &c);
     let now = 1000 * MS;
-    d.accept_state(&state(1, 0, now, Q), 9).unwrap();
+    d.accept_state(&state(1, 0, now, Q), 9, 0).unwrap();
     let t = d.compute(&sp(1, now, Q, [500.0; 6]), 1, now).unwrap();
     assert_ne!(t.flags & torque_flags::CLAMPED, 0);
     for i in 0..6 {
@@ -170,7 +171,7 @@ fn a_state_that_jumped_gives_a_torque_ramp_not_a_step() {
         },
     );
     let now = 1000 * MS;
-    d.accept_state(&state(1, 0, now, Q), 9).unwrap();
+    d.accept_state(&state(1, 0, now, Q), 9, 0).unwrap();
     let first = d.compute(&sp(1, now, Q, [0.0; 6]), 1, now).unwrap();
     assert_eq!(first.flags & torque_flags::SLEW_LIMITED, 0);
     // The arm sagged 0.02 rad on every joint while nothing ran.
@@ -180,11 +181,11 @@ fn a_state_that_jumped_gives_a_torque_ramp_not_a_step() {
         .iter()
         .map(|j| j.limits.effort / (c.dynamics.torque_slew_ms * 1e-3 * c.rate_hz))
         .collect();
-    free.accept_state(&state(1, 1, now, sagged), 9).unwrap();
+    free.accept_state(&state(1, 1, now, sagged), 9, 0).unwrap();
     let wanted = free.compute(&sp(2, now, Q, [0.0; 6]), 1, now).unwrap();
     let mut prev = first;
     for k in 2..40u64 {
-        d.accept_state(&state(k, k - 1, now, sagged), 9).unwrap();
+        d.accept_state(&state(k, k - 1, now, sagged), 9, 0).unwrap();
         let t = d.compute(&sp(k, now, Q, [0.0; 6]), 1, now).unwrap();
         for (i, max) in per_tick.iter().enumerate() {
             let step = (t.tau[i] - prev.tau[i]).abs();

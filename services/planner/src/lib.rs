@@ -30,7 +30,7 @@
 pub mod program;
 pub mod teleop;
 
-use iceoryx2::prelude::*;
+use anyhow::Context as _;
 use microrobot_messages::{
     CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState, MAX_JOINTS,
     MasterPose, MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole, ServiceStatus,
@@ -41,7 +41,7 @@ use microrobot_model::{ModelData, Robot};
 use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::{Refusal, SeqTracker, check_fresh, check_state};
-use microrobot_runtime::{BadConfig, PeriodicClock, Shutdown, StatusPort, open_node, waitset};
+use microrobot_runtime::{BadConfig, PeriodicClock, Reactor, Shutdown, StatusPort, open_node};
 use microrobot_trajectory::{
     Generator, JointState, JointVector, KinematicLimits, MotionRequest, Profile, Sample, Status,
     Trajectory, stop_trajectory,
@@ -121,9 +121,8 @@ impl CommandError {
 }
 
 /// The smallest `MotionCommand::limit_scale` accepted (0 aside, which means the
-/// config's): slower than 0.1 % of the robot's limits is no motion anyone asks for, and
-/// denormal limits break the planners' root finding (a corpus input found a panic).
-pub const MIN_LIMIT_SCALE: f64 = 1e-3;
+/// config's); the config's scales have the same floor.
+pub use microrobot_runtime::config::MIN_LIMIT_SCALE;
 
 /// What the planner is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -234,7 +233,7 @@ impl PlannerCore {
             program,
             started: false,
             tick: 0,
-            state_seq: SeqTracker::default(),
+            state_seq: SeqTracker::new((cfg.watchdog.stale_ms * 1e6) as u64),
             last_state: None,
             counters: Counters::default(),
             last_error: None,
@@ -300,11 +299,11 @@ impl PlannerCore {
         &self.current
     }
 
-    /// Validates a measured state; the first one sets the start position (at rest).
-    /// Returns whether it was accepted.
-    pub fn accept_state(&mut self, s: &BusState, publisher: u128) -> bool {
-        if let Err(e) =
-            check_state(s, self.dof).and_then(|()| self.state_seq.accept(publisher, s.header.seq))
+    /// Validates a measured state (from `publisher`, received at `now_ns`); the first
+    /// one sets the start position (at rest). Returns whether it was accepted.
+    pub fn accept_state(&mut self, s: &BusState, publisher: u128, now_ns: u64) -> bool {
+        if let Err(e) = check_state(s, self.dof)
+            .and_then(|()| self.state_seq.accept(publisher, s.header.seq, now_ns))
         {
             self.counters.states_refused += 1;
             self.last_state_refusal = Some(e);
@@ -862,7 +861,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             let msg = *s;
             let publisher = s.header().publisher_id().value();
             drop(s);
-            core.accept_state(&msg, publisher);
+            core.accept_state(&msg, publisher, monotonic_ns());
         }
         if core.started() {
             break;
@@ -885,20 +884,14 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         let p = status.period_ns();
         timer.arm_absolute(monotonic_ns() + p, p)?;
     }
-    let ws = waitset()?;
-    let g_state = match &st_listener {
-        Some(l) => Some(ws.attach_notification(l).map_err(|e| err("waitset")(&e))?),
+    let mut reactor = Reactor::new().context("epoll")?;
+    let on_state = match &st_listener {
+        Some(l) => Some(reactor.add(l).context("epoll")?),
         None => None,
     };
-    let g_cmd = ws
-        .attach_notification(&cmd_listener)
-        .map_err(|e| err("waitset")(&e))?;
-    let g_timer = ws
-        .attach_notification(&timer)
-        .map_err(|e| err("waitset")(&e))?;
-    let g_stop = ws
-        .attach_notification(shutdown)
-        .map_err(|e| err("waitset")(&e))?;
+    let on_command = reactor.add(&cmd_listener).context("epoll")?;
+    let on_timer = reactor.add(&timer).context("epoll")?;
+    let on_stop = reactor.add(shutdown).context("epoll")?;
 
     let publish = |sp: JointSetpoint| {
         if sp_pub.send_copy(sp).is_ok() {
@@ -962,22 +955,14 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
     microrobot_runtime::enter_cycle(cfg);
     while !shutdown.is_requested() {
-        let mut fired = [false; 4];
-        ws.wait_and_process_once(|id| {
-            fired[0] |= g_state.as_ref().is_some_and(|g| id.has_event_from(g));
-            fired[1] |= id.has_event_from(&g_cmd);
-            fired[2] |= id.has_event_from(&g_timer);
-            fired[3] |= id.has_event_from(&g_stop);
-            CallbackProgression::Continue
-        })
-        .map_err(|e| anyhow::anyhow!("waitset: {e:?}"))?;
-        if fired[3] || shutdown.is_requested() {
+        let ready = reactor.wait().context("epoll_wait")?;
+        if ready.contains(on_stop) || shutdown.is_requested() {
             break;
         }
         // Commands are drained on every wake-up, not only on their event: a sample can
         // become visible after its notification when the sender's connection is new.
         {
-            if fired[1] {
+            if ready.contains(on_command) {
                 let _ = cmd_listener.try_wait(|_| {});
             }
             while let Ok(Some(s)) = cmd_sub.receive() {
@@ -1000,7 +985,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             core.on_master(&m, monotonic_ns());
         }
         // States: ticking on states, each one is a tick; otherwise keep the newest.
-        if fired[0] || !on_states {
+        if ready.contains_opt(on_state) || !on_states {
             if let Some(l) = &st_listener {
                 let _ = l.try_wait(|_| {});
             }
@@ -1008,7 +993,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
-                if core.accept_state(&msg, publisher) && on_states {
+                if core.accept_state(&msg, publisher, monotonic_ns()) && on_states {
                     let now = monotonic_ns();
                     if !cfg.lockstep {
                         // The state's stamp is the master clock's tick: lateness is the
@@ -1022,7 +1007,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 }
             }
         }
-        if fired[2] {
+        if ready.contains(on_timer) {
             ticker.on_expirations(timer.read_expirations());
             if on_states {
                 while ticker.next_tick().is_some() {}

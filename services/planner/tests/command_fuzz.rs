@@ -25,7 +25,7 @@ fn planner() -> PlannerCore {
         },
         ..Default::default()
     };
-    assert!(p.accept_state(&s, 1));
+    assert!(p.accept_state(&s, 1, 0));
     p
 }
 

@@ -25,7 +25,7 @@ fn setup() -> PlannerCore {
         },
         ..Default::default()
     };
-    assert!(p.accept_state(&s, 1));
+    assert!(p.accept_state(&s, 1, 0));
     p
 }
 
@@ -200,12 +200,12 @@ fn a_reset_in_the_safe_state_resumes_when_the_actuator_does() {
         },
         ..Default::default()
     };
-    assert!(p.accept_state(&state(2, true), 1));
+    assert!(p.accept_state(&state(2, true), 1, 0));
     p.check_state(0);
     assert_eq!(p.mode(), Mode::SafeHold);
     assert!(p.on_command(&cmd(CommandKind::Reset), 0).is_ok());
     // The actuator has not processed the reset yet: still following it.
-    assert!(p.accept_state(&state(3, true), 1));
+    assert!(p.accept_state(&state(3, true), 1, 0));
     p.check_state(0);
     p.tick(0);
     assert_eq!(p.mode(), Mode::SafeHold);
@@ -214,7 +214,7 @@ fn a_reset_in_the_safe_state_resumes_when_the_actuator_does() {
         Err(CommandError::SafeStateActive)
     );
     // Now it has: the planner resumes (a jerk-limited stop from the measured state).
-    assert!(p.accept_state(&state(4, false), 1));
+    assert!(p.accept_state(&state(4, false), 1, 0));
     p.check_state(0);
     assert_ne!(p.mode(), Mode::SafeHold);
     assert!(p.on_command(&mv(T, ProfileKind::Soft, 0.0), 0).is_ok());
@@ -241,7 +241,7 @@ fn a_planner_starting_on_a_moving_arm_continues_from_its_measured_velocity() {
     moving.q[0] = 0.2;
     moving.qd[0] = 0.3;
     let mut p = PlannerCore::new(&robot, &cfg, None);
-    assert!(p.accept_state(&moving, 1));
+    assert!(p.accept_state(&moving, 1, 0));
     let sp = p.tick(0);
     let amax = robot.joints()[0].limits.acceleration;
     assert!((sp.qd[0] - 0.3).abs() <= amax * 1e-3 * 1.01, "{sp:?}");
@@ -250,7 +250,7 @@ fn a_planner_starting_on_a_moving_arm_continues_from_its_measured_velocity() {
 
     moving.flags = microrobot_messages::state_flags::SAFE_STATE;
     let mut p = PlannerCore::new(&robot, &cfg, None);
-    assert!(p.accept_state(&moving, 1));
+    assert!(p.accept_state(&moving, 1, 0));
     let sp = p.tick(0);
     assert_eq!(p.mode(), Mode::SafeHold);
     assert_ne!(

@@ -59,8 +59,8 @@ fn run_loop(cfg: &PipelineConfig, target: [f64; 6], steps: usize) -> Run {
         now
     };
     let s0 = act.state_message(clock());
-    assert!(planner.accept_state(&s0, 3));
-    dynamics.accept_state(&s0, 3).unwrap();
+    assert!(planner.accept_state(&s0, 3, clock()));
+    dynamics.accept_state(&s0, 3, clock()).unwrap();
     planner.on_command(&move_command(target), clock()).unwrap();
     let mut run = Run {
         setpoints: vec![],
@@ -73,8 +73,8 @@ fn run_loop(cfg: &PipelineConfig, target: [f64; 6], steps: usize) -> Run {
         let tq = dynamics.compute(&sp, 1, clock()).unwrap();
         act.accept_torque(&tq, 2, clock()).unwrap();
         let st = act.step(clock());
-        assert!(planner.accept_state(&st, 3));
-        dynamics.accept_state(&st, 3).unwrap();
+        assert!(planner.accept_state(&st, 3, clock()));
+        dynamics.accept_state(&st, 3, clock()).unwrap();
         run.setpoints.push(sp);
         run.torques.push(tq);
         run.states.push(st);

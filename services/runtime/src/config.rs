@@ -104,15 +104,21 @@ pub struct WatchdogConfig {
     pub ramp_ms: f64,
 }
 
+/// The smallest limit scale accepted, in the config and in motion commands: slower than
+/// 0.1 % of the robot's limits is no motion anyone asks for, and denormal limits break
+/// the planners' root finding (a fuzz corpus input found a panic at 1e-300).
+pub const MIN_LIMIT_SCALE: f64 = 1e-3;
+
 /// `[planner]`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlannerConfig {
     /// How long to wait at start for the actuator's first measured state (ms).
     pub state_timeout_ms: f64,
-    /// Scale (0, 1] of the robot's velocity/acceleration/jerk limits for the program and
-    /// for commands that give no scale.
+    /// Scale [0.001, 1] ([`MIN_LIMIT_SCALE`]) of the robot's velocity/acceleration/jerk
+    /// limits for the program and for commands that give no scale.
     pub limit_scale: f64,
-    /// Scale (0, 1] of the limits for the e-stop's jerk-limited brake (1 = the full limits).
+    /// Scale [0.001, 1] of the limits for the e-stop's jerk-limited brake (1 = the full
+    /// limits).
     pub estop_limit_scale: f64,
     /// A Move command with a stamp older than this is refused as stale (ms).
     pub command_max_age_ms: f64,
@@ -800,14 +806,21 @@ impl Reader<'_> {
                 600_000.0,
                 true,
             )?,
-            limit_scale: self.f64_in(&t, "limit_scale", dp.limit_scale, 0.0, 1.0, true)?,
+            limit_scale: self.f64_in(
+                &t,
+                "limit_scale",
+                dp.limit_scale,
+                MIN_LIMIT_SCALE,
+                1.0,
+                false,
+            )?,
             estop_limit_scale: self.f64_in(
                 &t,
                 "estop_limit_scale",
                 dp.estop_limit_scale,
-                0.0,
+                MIN_LIMIT_SCALE,
                 1.0,
-                true,
+                false,
             )?,
             command_max_age_ms: self.f64_in(
                 &t,
@@ -1242,6 +1255,20 @@ mod tests {
             err_key("[planner]\nlimit_scale = 1.5").0.as_deref(),
             Some("planner.limit_scale")
         );
+        // Denormal and tiny scales: refused like a command's, named, with the range.
+        for (text, key) in [
+            ("[planner]\nlimit_scale = 1e-300", "planner.limit_scale"),
+            ("[planner]\nlimit_scale = 0.0009", "planner.limit_scale"),
+            (
+                "[planner]\nestop_limit_scale = 1e-300",
+                "planner.estop_limit_scale",
+            ),
+        ] {
+            let (k, msg) = err_key(text);
+            assert_eq!(k.as_deref(), Some(key), "{text}");
+            assert!(msg.contains("[0.001, 1]"), "{text}: {msg}");
+        }
+        assert!(parse("[planner]\nlimit_scale = 0.001").is_ok());
     }
 
     #[test]

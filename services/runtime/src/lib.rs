@@ -7,6 +7,7 @@
 
 pub mod config;
 pub mod node;
+pub mod reactor;
 pub mod rt;
 pub mod shutdown;
 pub mod stats;
@@ -21,6 +22,7 @@ use std::process::ExitCode;
 pub use config::{ConfigError, PipelineConfig};
 pub use microrobot_messages::ServiceRole;
 pub use node::{InstanceInUse, open_node, waitset};
+pub use reactor::{Reactor, Ready, Source};
 pub use shutdown::Shutdown;
 pub use status::StatusPort;
 pub use timer::{PeriodicClock, Ticker, TimerFd};

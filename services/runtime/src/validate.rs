@@ -19,6 +19,8 @@ pub enum Refusal {
     Stale,
     /// Outside the joint limits.
     OutOfLimits,
+    /// From a second publisher while the stream's publisher is still live.
+    SecondPublisher,
 }
 
 impl Refusal {
@@ -30,47 +32,71 @@ impl Refusal {
             Self::OutOfOrder => RefusalReason::OutOfOrder,
             Self::Stale => RefusalReason::Stale,
             Self::OutOfLimits => RefusalReason::OutOfLimits,
+            Self::SecondPublisher => RefusalReason::SecondPublisher,
         }
     }
 }
 
 /// Per-stream sequence tracking: refuses duplicates and reordering, counts gaps as lost
-/// messages, and starts over when the publisher changes (a restarted process).
-#[derive(Debug, Clone, Copy, Default)]
+/// messages, and follows one publisher at a time.
+///
+/// A stream has one publisher (messages/README.md). A message from another one is
+/// refused ([`Refusal::SecondPublisher`]) while the current one is live, i.e. its last
+/// accepted message is younger than the takeover time (the stage's `stale_ms`), so a
+/// stray or rogue second publisher cannot interleave its messages with the pipeline's.
+/// Once the current publisher has been silent that long (it died, or was killed and the
+/// supervisor restarts it), the next publisher takes the stream over and its sequence
+/// starts afresh.
+#[derive(Debug, Clone, Copy)]
 pub struct SeqTracker {
     publisher: Option<u128>,
     last: Option<u64>,
+    last_accepted_ns: u64,
+    takeover_ns: u64,
     /// Messages missing between accepted ones (gaps).
     pub lost: u64,
-    /// Times the publisher changed (restarts seen).
+    /// Times another publisher took the stream over (restarts seen).
     pub publisher_changes: u64,
 }
 
 impl SeqTracker {
-    /// Checks `seq` from `publisher` (iceoryx2's unique publisher id); on success it
-    /// becomes the last accepted one.
+    /// A tracker whose stream another publisher may take over after `takeover_ns` of
+    /// silence from the current one.
+    pub fn new(takeover_ns: u64) -> Self {
+        Self {
+            publisher: None,
+            last: None,
+            last_accepted_ns: 0,
+            takeover_ns,
+            lost: 0,
+            publisher_changes: 0,
+        }
+    }
+
+    /// Checks `seq` from `publisher` (iceoryx2's unique publisher id), received at
+    /// `now_ns`; on success it becomes the last accepted one.
     #[inline]
-    pub fn accept(&mut self, publisher: u128, seq: u64) -> Result<(), Refusal> {
+    pub fn accept(&mut self, publisher: u128, seq: u64, now_ns: u64) -> Result<(), Refusal> {
         if self.publisher != Some(publisher) {
             if self.publisher.is_some() {
+                if now_ns.saturating_sub(self.last_accepted_ns) < self.takeover_ns {
+                    return Err(Refusal::SecondPublisher);
+                }
                 self.publisher_changes += 1;
             }
             self.publisher = Some(publisher);
             self.last = Some(seq);
+            self.last_accepted_ns = now_ns;
             return Ok(());
         }
         match self.last {
-            Some(l) if seq <= l => Err(Refusal::OutOfOrder),
-            Some(l) => {
-                self.lost += seq - l - 1;
-                self.last = Some(seq);
-                Ok(())
-            }
-            None => {
-                self.last = Some(seq);
-                Ok(())
-            }
+            Some(l) if seq <= l => return Err(Refusal::OutOfOrder),
+            Some(l) => self.lost += seq - l - 1,
+            None => {}
         }
+        self.last = Some(seq);
+        self.last_accepted_ns = now_ns;
+        Ok(())
     }
 
     /// Last accepted sequence number.
@@ -156,24 +182,33 @@ mod tests {
 
     #[test]
     fn sequence_gaps_are_lost_and_duplicates_refused() {
-        let mut t = SeqTracker::default();
-        assert_eq!(t.accept(7, 1), Ok(()));
-        assert_eq!(t.accept(7, 2), Ok(()));
-        assert_eq!(t.accept(7, 5), Ok(()));
+        let mut t = SeqTracker::new(50);
+        assert_eq!(t.accept(7, 1, 0), Ok(()));
+        assert_eq!(t.accept(7, 2, 1), Ok(()));
+        assert_eq!(t.accept(7, 5, 2), Ok(()));
         assert_eq!(t.lost, 2);
-        assert_eq!(t.accept(7, 5), Err(Refusal::OutOfOrder));
-        assert_eq!(t.accept(7, 3), Err(Refusal::OutOfOrder));
+        assert_eq!(t.accept(7, 5, 3), Err(Refusal::OutOfOrder));
+        assert_eq!(t.accept(7, 3, 4), Err(Refusal::OutOfOrder));
         assert_eq!(t.last(), Some(5));
     }
 
     #[test]
-    fn a_new_publisher_starts_a_new_sequence() {
-        let mut t = SeqTracker::default();
-        t.accept(1, 100).unwrap();
-        assert_eq!(t.accept(2, 0), Ok(()));
+    fn a_second_publisher_is_refused_while_the_first_is_live_and_takes_over_after_it_fell_silent() {
+        let mut t = SeqTracker::new(50);
+        t.accept(1, 100, 1_000).unwrap();
+        // Live: the first one's last message is younger than the takeover time.
+        assert_eq!(t.accept(2, 0, 1_049), Err(Refusal::SecondPublisher));
+        t.accept(1, 101, 1_049).unwrap();
+        assert_eq!(t.accept(2, 1, 1_098), Err(Refusal::SecondPublisher));
+        assert_eq!(t.publisher_changes, 0);
+        assert_eq!(t.last(), Some(101));
+        // Silent for the takeover time: the next publisher takes over, sequence afresh.
+        assert_eq!(t.accept(2, 7, 1_099), Ok(()));
         assert_eq!(t.publisher_changes, 1);
-        assert_eq!(t.accept(2, 1), Ok(()));
+        assert_eq!(t.accept(2, 8, 1_100), Ok(()));
         assert_eq!(t.lost, 0);
+        // And now the old one is the second publisher.
+        assert_eq!(t.accept(1, 102, 1_101), Err(Refusal::SecondPublisher));
     }
 
     #[test]

@@ -74,7 +74,7 @@ impl ClosedLoop {
         let now_ns = period_ns;
         let state = actuator.state_message(now_ns);
         let mut planner = PlannerCore::new(&robot, cfg, program);
-        planner.accept_state(&state, PUBLISHER);
+        planner.accept_state(&state, PUBLISHER, now_ns);
         Ok(Self {
             planner,
             dynamics: DynamicsCore::new(&robot, cfg),
@@ -94,7 +94,7 @@ impl ClosedLoop {
     /// One tick of the loop.
     pub fn tick(&mut self) -> TickOutput {
         let now = self.now_ns;
-        let _ = self.dynamics.accept_state(&self.state, PUBLISHER);
+        let _ = self.dynamics.accept_state(&self.state, PUBLISHER, now);
         if !std::mem::take(&mut self.first) {
             self.planner.check_state(now);
         }
@@ -107,7 +107,7 @@ impl ClosedLoop {
         let state = self.actuator.step(now);
         // The planner sees state k+1 as it arrives (the service accepts it on its event
         // and ticks right away).
-        self.planner.accept_state(&state, PUBLISHER);
+        self.planner.accept_state(&state, PUBLISHER, now);
         self.state = state;
         self.now_ns += self.period_ns;
         TickOutput {

@@ -141,7 +141,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
         {
             match state_by_seq.get(&t.state_seq) {
                 Some(s) => {
-                    let _ = core.accept_state(s, PUBLISHER);
+                    let _ = core.accept_state(s, PUBLISHER, 0);
                     fed = Some(t.state_seq);
                 }
                 None => {
