@@ -60,6 +60,24 @@ fn a_short_soak_with_a_kill_of_each_service_recovers_without_jumps_or_losses() {
         .filter_map(|f| f["role"].as_str())
         .collect();
     assert_eq!(killed, ["planner", "dynamics", "actuator"], "{}", ctx());
+    // One planner kill: the floor probe split its lateness into the planner's two
+    // process lifetimes, and the planner is held against the larger window p99.
+    let windows = r["floor"]["window_p99_us"]
+        .as_array()
+        .expect("floor windows");
+    assert_eq!(windows.len(), 2, "{}", r["floor"]);
+    let worst = windows
+        .iter()
+        .map(|w| w.as_f64().expect("p99"))
+        .fold(0.0, f64::max);
+    let planner_p99 = r["planner_lateness_us"]["p99"]
+        .as_f64()
+        .expect("planner p99");
+    let ratio = r["lateness_p99_vs_floor"].as_f64().expect("ratio");
+    assert!(
+        (ratio - planner_p99 / worst).abs() <= 1e-9 * ratio.abs(),
+        "{ratio} vs {planner_p99} / {worst}"
+    );
     assert_eq!(v["pass"], true, "{}", ctx());
     assert_eq!(done.code(), Some(0), "{}", ctx());
     // The markdown is rendered from the same report, and `--render` reproduces it.

@@ -162,6 +162,7 @@ impl FloorProbe {
                 ticks: f.ticks,
                 lateness_us: crate::supervisor::summary::Percentiles::from(&f.lateness),
                 deadline_misses: f.deadline_misses,
+                window_p99_us: Vec::new(),
             }),
             Ok(Err(e)) => {
                 eprintln!("warning: the floor probe failed: {e}");

@@ -183,7 +183,7 @@ impl PeriodicClock {
 }
 
 /// Result of the bare timer-loop probe ([`floor_probe`]).
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct FloorReport {
     /// Ticks run.
     pub ticks: u64,
@@ -191,6 +191,9 @@ pub struct FloorReport {
     pub lateness: microrobot_messages::LatencySummary,
     /// Ticks that started more than one period late.
     pub deadline_misses: u64,
+    /// Lateness per window between bumps of the `epoch` given to
+    /// [`floor_probe_windows`] (one window without one).
+    pub windows: Vec<microrobot_messages::LatencySummary>,
 }
 
 /// The machine's timer floor: a bare timerfd loop at `period_ns` for `duration_ns`, with
@@ -220,7 +223,25 @@ pub fn floor_probe_until(
     overrun: OverrunPolicy,
     stop: &std::sync::atomic::AtomicBool,
 ) -> std::io::Result<FloorReport> {
+    floor_probe_windows(period_ns, duration_ns, overrun, stop, None)
+}
+
+/// [`floor_probe_until`] that also keeps one lateness histogram per window, a new window
+/// starting whenever `epoch` changes. The soak bumps it when it kills the planner: each
+/// planner process reports the percentiles of its own lifetime, so the floor's
+/// per-window figures are the ones to hold them against.
+pub fn floor_probe_windows(
+    period_ns: u64,
+    duration_ns: u64,
+    overrun: OverrunPolicy,
+    stop: &std::sync::atomic::AtomicBool,
+    epoch: Option<&std::sync::atomic::AtomicU64>,
+) -> std::io::Result<FloorReport> {
+    use std::sync::atomic::Ordering::Relaxed;
     let mut hist = crate::stats::LatencyHistogram::new();
+    let mut window = crate::stats::LatencyHistogram::new();
+    let mut windows = Vec::new();
+    let mut seen_epoch = epoch.map_or(0, |e| e.load(Relaxed));
     let mut clock = PeriodicClock::start(period_ns, overrun)?;
     let end = monotonic_ns() + duration_ns;
     let mut ticks = 0;
@@ -238,16 +259,30 @@ pub fn floor_probe_until(
         clock.poll();
         while let Some(t) = clock.ticker.next_tick() {
             hist.record(now.saturating_sub(t.ideal_ns));
+            window.record(now.saturating_sub(t.ideal_ns));
             ticks += 1;
         }
-        if now >= end || stop.load(std::sync::atomic::Ordering::Relaxed) {
+        if let Some(e) = epoch.map(|e| e.load(Relaxed))
+            && e != seen_epoch
+        {
+            seen_epoch = e;
+            if !window.is_empty() {
+                windows.push(window.summary());
+                window = crate::stats::LatencyHistogram::new();
+            }
+        }
+        if now >= end || stop.load(Relaxed) {
             break;
         }
+    }
+    if !window.is_empty() {
+        windows.push(window.summary());
     }
     Ok(FloorReport {
         ticks,
         lateness: hist.summary(),
         deadline_misses: clock.ticker.deadline_misses,
+        windows,
     })
 }
 
@@ -303,5 +338,51 @@ mod tests {
             n += 1;
         }
         assert!(n >= 1);
+    }
+
+    #[test]
+    fn the_floor_probe_starts_a_window_at_each_epoch_bump_and_every_tick_is_in_one() {
+        use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+        let stop = AtomicBool::new(false);
+        let epoch = AtomicU64::new(7);
+        let report = std::thread::scope(|s| {
+            s.spawn(|| {
+                for _ in 0..2 {
+                    std::thread::sleep(std::time::Duration::from_millis(30));
+                    epoch.fetch_add(1, Ordering::Relaxed);
+                }
+                std::thread::sleep(std::time::Duration::from_millis(30));
+                stop.store(true, Ordering::Relaxed);
+            });
+            floor_probe_windows(
+                1_000_000,
+                10_000_000_000,
+                OverrunPolicy::CatchUp,
+                &stop,
+                Some(&epoch),
+            )
+            .unwrap()
+        });
+        // Three windows (an empty one, possible only if the probe got no CPU for 30 ms,
+        // is not kept); each tick is counted in exactly one of them.
+        assert!(
+            (2..=3).contains(&report.windows.len()),
+            "{:?}",
+            report.windows
+        );
+        let in_windows: u64 = report.windows.iter().map(|w| w.count).sum();
+        assert_eq!(in_windows, report.ticks);
+        assert_eq!(report.lateness.count, report.ticks);
+        // Without an epoch: one window, the whole run.
+        let one = floor_probe_windows(
+            1_000_000,
+            5_000_000,
+            OverrunPolicy::CatchUp,
+            &AtomicBool::new(false),
+            None,
+        )
+        .unwrap();
+        assert_eq!(one.windows.len(), 1);
+        assert_eq!(one.windows[0].count, one.ticks);
     }
 }

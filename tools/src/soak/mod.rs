@@ -22,7 +22,7 @@ use microrobot_messages::{LifecycleState, ServiceRole, monotonic_ns};
 use microrobot_model::Robot;
 use microrobot_runtime::config::{FailurePolicy, RealtimeConfig};
 use microrobot_runtime::exit_code;
-use microrobot_runtime::timer::{FloorReport, floor_probe};
+use microrobot_runtime::timer::{FloorReport, floor_probe_windows};
 
 use crate::run::{self, Control, Hooks, RunArgs};
 use crate::supervisor::summary::Percentiles;
@@ -254,6 +254,7 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
         t0_ns: 0,
         kills: Vec::new(),
         rotation: 0,
+        floor_epoch: Default::default(),
         next_kill_s: args.kill_every.unwrap_or(f64::INFINITY),
         pending_fault: false,
         last_command: None,
@@ -283,6 +284,7 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
                 ticks: f.ticks,
                 lateness_us: Percentiles::from(&f.lateness),
                 deadline_misses: f.deadline_misses,
+                window_p99_us: f.windows.iter().map(|w| w.p99_ns as f64 / 1000.0).collect(),
             }),
             _ => None,
         }
@@ -381,6 +383,8 @@ struct Soak {
     port: Option<CommandPort>,
     load: Option<CpuLoad>,
     floor: Option<JoinHandle<std::io::Result<FloorReport>>>,
+    /// Bumped at every planner kill: the floor probe starts a new window.
+    floor_epoch: std::sync::Arc<std::sync::atomic::AtomicU64>,
     t0: Option<Instant>,
     t0_ns: u64,
     kills: Vec<Kill>,
@@ -404,11 +408,13 @@ impl Soak {
         self.t0_ns = monotonic_ns();
         let rt = self.realtime.clone();
         let (period, duration) = (self.period_ns, (self.args.duration * 1e9) as u64);
+        let epoch = self.floor_epoch.clone();
         self.floor = std::thread::Builder::new()
             .name("soak-floor".into())
             .spawn(move || {
                 let _guard = microrobot_runtime::rt::apply(&rt);
-                floor_probe(period, duration, rt.overrun)
+                let never = std::sync::atomic::AtomicBool::new(false);
+                floor_probe_windows(period, duration, rt.overrun, &never, Some(&epoch))
             })
             .ok();
         if self.args.cpu_load > 0 {
@@ -471,6 +477,10 @@ impl Hooks for Soak {
             self.rotation += 1;
             self.next_kill_s += self.args.kill_every.unwrap_or(f64::INFINITY);
             if let Some(pid) = ctl.kill(role) {
+                if role == ServiceRole::Planner {
+                    self.floor_epoch
+                        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
                 self.kills.push(Kill {
                     role: role.name().to_string(),
                     pid,

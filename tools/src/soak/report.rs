@@ -394,8 +394,8 @@ impl Report {
         let floor = facts.floor.clone();
         let ratio = floor
             .as_ref()
-            .filter(|f| f.lateness_us.p99 > 0.0)
-            .map(|f| pipeline.planner_lateness_us.p99 / f.lateness_us.p99);
+            .filter(|f| f.p99_for_planner() > 0.0)
+            .map(|f| pipeline.planner_lateness_us.p99 / f.p99_for_planner());
         let mut res = BTreeMap::new();
         for (i, name) in ROLES.iter().enumerate() {
             res.insert(
@@ -588,8 +588,30 @@ impl Report {
                     p(&f.lateness_us),
                     f.deadline_misses
                 );
+                if f.window_p99_us.len() > 1 {
+                    let w = &f.window_p99_us;
+                    let mut sorted = w.clone();
+                    sorted.sort_by(f64::total_cmp);
+                    let _ = writeln!(
+                        s,
+                        "The planner restarted {} times, and its p99 is the largest of its {} \
+                         processes' p99s. The floor's p99 in the same {} windows (split at \
+                         each planner kill): min {:.1}, median {:.1}, max {:.1} µs; the \
+                         planner is held against the largest, the figure of the same kind.\n",
+                        w.len() - 1,
+                        w.len(),
+                        w.len(),
+                        sorted[0],
+                        sorted[sorted.len() / 2],
+                        sorted[sorted.len() - 1]
+                    );
+                }
                 if let Some(r) = self.lateness_p99_vs_floor {
-                    let _ = writeln!(s, "Planner lateness p99 = {r:.2} × the floor's p99.\n");
+                    let _ = writeln!(
+                        s,
+                        "Planner lateness p99 = {r:.2} × the floor's p99 ({:.1} µs).\n",
+                        f.p99_for_planner()
+                    );
                 }
             }
             None => {

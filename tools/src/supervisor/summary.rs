@@ -112,6 +112,24 @@ pub struct Floor {
     pub ticks: u64,
     pub lateness_us: Percentiles,
     pub deadline_misses: u64,
+    /// Soak with planner kills: the floor's lateness p99 in each window between two
+    /// planner kills, and the largest of them. A planner that restarted reports the
+    /// largest p99 of its processes, so this is the floor's figure of the same kind.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub window_p99_us: Vec<f64>,
+}
+
+impl Floor {
+    /// The floor's p99 to hold a planner p99 against: the largest per-window p99 when
+    /// the planner restarted (its figure is the largest of its processes'), else the
+    /// whole run's.
+    pub fn p99_for_planner(&self) -> f64 {
+        if self.window_p99_us.len() > 1 {
+            self.window_p99_us.iter().copied().fold(0.0, f64::max)
+        } else {
+            self.lateness_us.p99
+        }
+    }
 }
 
 /// Adds the counters of `s` (one process's last status) into `acc` (over restarts):
