@@ -1,36 +1,14 @@
 //! The teleop controller on the seed arm: scaling, clutch, workspace edge, NaN input,
 //! limits and continuity, and no allocation per cycle.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use microrobot_model::{JointVector, ModelData, Robot, forward_kinematics};
 use microrobot_teleop::{Hand, TeleopController, TeleopSettings, TeleopStep, flags};
 use microrobot_trajectory::{KinematicLimits, Sample};
 use nalgebra::Vector3;
 
-struct Counting;
-thread_local! {
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.with(|c| c.set(c.get() + 1));
-        // SAFETY: forwarded unchanged to the system allocator.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-#[global_allocator]
-static GLOBAL: Counting = Counting;
+#[path = "../../../tests/support/counting_alloc.rs"]
+mod counting_alloc;
+use counting_alloc::allocations;
 
 const DT: f64 = 1e-3;
 
@@ -237,7 +215,7 @@ fn non_finite_samples_are_refused_and_do_not_move_the_arm() {
 fn a_step_allocates_nothing() {
     let robot = robot();
     let mut c = controller(&robot);
-    let before = ALLOCATIONS.with(|a| a.get());
+    let before = allocations();
     for i in 0..2000 {
         let t = i as f64 * DT;
         let h = Hand {
@@ -247,7 +225,7 @@ fn a_step_allocates_nothing() {
         std::hint::black_box(c.step(Some(&h)));
         std::hint::black_box(c.step(None));
     }
-    assert_eq!(ALLOCATIONS.with(|a| a.get()), before);
+    assert_eq!(allocations(), before);
 }
 
 /// Amplitude and phase lag (rad) of `y` at `f_hz`, least squares over samples `t`.
