@@ -254,9 +254,10 @@ impl PlannerCore {
         &self.teleop
     }
 
-    /// Takes a master-device sample received at `now_ns` (used in teleop mode only).
-    pub fn on_master(&mut self, m: &MasterPose, now_ns: u64) -> bool {
-        self.teleop.on_master(m, now_ns)
+    /// Takes a master-device sample from `publisher` received at `now_ns` (used in
+    /// teleop mode only; one device at a time, see [`teleop::TeleopMode::on_master`]).
+    pub fn on_master(&mut self, m: &MasterPose, publisher: u128, now_ns: u64) -> bool {
+        self.teleop.on_master(m, publisher, now_ns)
     }
 
     fn enter_teleop(&mut self) -> Result<(), CommandError> {
@@ -981,8 +982,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         // Master samples: the newest valid one is used at the next tick.
         while let Ok(Some(s)) = master_sub.receive() {
             let m = *s;
+            let publisher = s.header().publisher_id().value();
             drop(s);
-            core.on_master(&m, monotonic_ns());
+            core.on_master(&m, publisher, monotonic_ns());
         }
         // States: ticking on states, each one is a tick; otherwise keep the newest.
         if ready.contains_opt(on_state) || !on_states {
@@ -1036,9 +1038,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     if t.counters.samples > 0 || t.counters.refused > 0 {
         let l = t.latency.summary();
         tracing::info!(
-            "planner: teleop: {} master samples, {} refused, {} stale cycles, {} flips refused, {} cycles at the workspace edge; master sample -> setpoint p50 {:.1} us, p99 {:.1} us",
+            "planner: teleop: {} master samples, {} refused ({} from a second device), {} stale cycles, {} flips refused, {} cycles at the workspace edge; master sample -> setpoint p50 {:.1} us, p99 {:.1} us",
             t.counters.samples,
             t.counters.refused,
+            t.counters.second_device,
             t.counters.stale_cycles,
             t.counters.flips_refused,
             t.counters.edge_cycles,

@@ -19,8 +19,10 @@ pub struct TeleopCounters {
     /// Master samples accepted.
     pub samples: u64,
     /// Master samples refused (not finite, quaternion not unit, clutch not 0/1,
-    /// stamp from the future).
+    /// stamp from the future, or from a second device).
     pub refused: u64,
+    /// Of those, samples from a second device while the followed one was live.
+    pub second_device: u64,
     /// Teleop cycles without a fresh master sample.
     pub stale_cycles: u64,
     /// Cycles with an IK solution refused as a configuration flip.
@@ -33,6 +35,8 @@ pub struct TeleopCounters {
 pub struct TeleopMode {
     controller: Result<TeleopController, String>,
     timeout_ns: u64,
+    /// The device followed (its iceoryx2 publisher) and when its last sample arrived.
+    device: Option<(u128, u64)>,
     latest: Option<MasterPose>,
     used_seq: Option<u64>,
     refused_since_tick: bool,
@@ -89,6 +93,7 @@ impl TeleopMode {
         Self {
             controller,
             timeout_ns: (cfg.teleop.master_timeout_ms * 1e6) as u64,
+            device: None,
             latest: None,
             used_seq: None,
             refused_since_tick: false,
@@ -102,13 +107,25 @@ impl TeleopMode {
         self.controller.as_ref().err().map(String::as_str)
     }
 
-    /// Takes a master sample received at `now_ns`; returns whether it was accepted.
-    pub fn on_master(&mut self, m: &MasterPose, now_ns: u64) -> bool {
-        if !m.is_valid() || m.stamp_ns > now_ns.saturating_add(1_000_000_000) {
+    /// Takes a master sample from `publisher` received at `now_ns`; returns whether it
+    /// was accepted. One device drives the arm: samples of another publisher are refused
+    /// while the followed one is live (a sample within `master_timeout_ms`); after that
+    /// long a silence (the master is stale and the tool already holds) the next device
+    /// takes over, from its own samples only.
+    pub fn on_master(&mut self, m: &MasterPose, publisher: u128, now_ns: u64) -> bool {
+        let second = self.device.is_some_and(|(p, last)| {
+            p != publisher && now_ns.saturating_sub(last) < self.timeout_ns
+        });
+        if second || !m.is_valid() || m.stamp_ns > now_ns.saturating_add(1_000_000_000) {
             self.counters.refused += 1;
+            self.counters.second_device += u64::from(second);
             self.refused_since_tick = true;
             return false;
         }
+        if self.device.is_some_and(|(p, _)| p != publisher) {
+            self.latest = None;
+        }
+        self.device = Some((publisher, now_ns));
         if self.latest.is_none_or(|l| l.stamp_ns <= m.stamp_ns) {
             self.latest = Some(*m);
         }

@@ -259,3 +259,36 @@ fn a_planner_starting_on_a_moving_arm_continues_from_its_measured_velocity() {
     );
     assert_eq!(sp.qd[0], 0.3);
 }
+
+/// One master device drives the arm: a second publisher's samples are refused while the
+/// followed device is live, and it takes over only after `master_timeout_ms` of silence.
+#[test]
+fn a_second_master_device_is_refused_while_the_first_is_live() {
+    let mut p = setup();
+    let ms = 1_000_000u64;
+    let t0 = 10_000 * ms;
+    let pose = |stamp_ns: u64| microrobot_messages::MasterPose {
+        stamp_ns,
+        orientation: [1.0, 0.0, 0.0, 0.0],
+        ..Default::default()
+    };
+    assert!(p.on_master(&pose(t0), 1, t0));
+    assert!(
+        !p.on_master(&pose(t0 + ms), 2, t0 + ms),
+        "second device, first live"
+    );
+    assert!(p.on_master(&pose(t0 + 2 * ms), 1, t0 + 2 * ms));
+    // 50 ms (the default master_timeout_ms) after the first device's last sample.
+    let later = t0 + 2 * ms + 50 * ms;
+    assert!(!p.on_master(&pose(later - 1), 2, later - 1));
+    assert!(
+        p.on_master(&pose(later), 2, later),
+        "takes over after the timeout"
+    );
+    assert!(
+        !p.on_master(&pose(later + ms), 1, later + ms),
+        "now the first is the second"
+    );
+    let c = &p.teleop().counters;
+    assert_eq!((c.samples, c.refused, c.second_device), (3, 3, 3));
+}
