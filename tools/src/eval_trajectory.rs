@@ -7,7 +7,7 @@
 //! at `times`, or `{"error": "..."}` naming the field; the next line is processed
 //! either way (an optional `"id"` is echoed back). When any per-joint field is an
 //! array the line is one synchronised multi-joint problem (scalars apply to every
-//! joint) and the samples come back indexed [time][joint].
+//! joint) and the samples come back indexed `[time][joint]`.
 
 use std::io::{BufRead, Write};
 

@@ -7,7 +7,7 @@
 //! the optimal motion's acceleration crosses zero at its velocity peak, the family's
 //! fastest member *is* the time-optimal motion. "Stop, then a rest-to-rest move"
 //! covers every duration from [`Stretch::guaranteed`] on. Durations neither reaches
-//! (blocked intervals, exact: [`super::reach`]) are reported as `None`, and
+//! (blocked intervals, exact: `super::reach`) are reported as `None`, and
 //! [`Stretch::next_reachable`] names the end of the blocked interval, where
 //! synchronisation moves on to, as Ruckig's time synchronisation does.
 
@@ -131,7 +131,7 @@ impl Stretch {
 
     /// The smallest duration ≥ `t` that [`Stretch::phases`] reaches: `t` itself
     /// unless it lies in a blocked interval, else that interval's end (see
-    /// [`super::reach`]). Synchronisation raises T to it.
+    /// `super::reach`). Synchronisation raises T to it.
     pub fn next_reachable(&self, t: f64) -> f64 {
         if self.rest {
             return t.max(self.t_r2r);
@@ -150,7 +150,7 @@ impl Stretch {
     /// Search: f(vp) = D1 + D2 + vp·Tc − d on peak velocities where the cruise Tc ≥ 0,
     /// from the upper anchor down between the stop velocity and the anchor (where Tc
     /// is monotone); when that finds nothing, on the exact member interval whose
-    /// durations hold t ([`super::reach`]); last resort "stop, then move".
+    /// durations hold t (`super::reach`); last resort "stop, then move".
     pub fn phases(&self, t: f64, lim: &Limits1) -> Option<Phases> {
         let mut ph = if self.rest {
             if t < self.t_r2r * (1.0 - 1e-12) {
@@ -356,7 +356,7 @@ enum Descent {
 /// first sign change (f ≥ 0 above, ≤ 0 below) between two neighbouring valid points;
 /// `g(x)` returns f(x) and whether x is valid. Returns the bracket ((lo, f(lo)),
 /// (hi, f(hi))). The old fallback search, kept for the tests' bracketing oracle (the
-/// exact member intervals of [`super::reach`] replaced it).
+/// exact member intervals of `super::reach` replaced it).
 #[cfg(test)]
 fn grid_bracket(
     u: f64,

@@ -3,7 +3,7 @@
 
 use super::{Kin, Limits1, Phases, stop_velocity};
 
-/// A velocity change as three phases: jerk `j` for t[0], 0 for t[1], −`j` for t[2].
+/// A velocity change as three phases: jerk `j` for `t[0]`, 0 for `t[1]`, −`j` for `t[2]`.
 /// Plain scalars, so root searches evaluate it without building phase lists.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ramp {
