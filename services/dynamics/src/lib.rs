@@ -114,13 +114,13 @@ impl DynamicsCore {
             kp: cfg.dynamics.kp_per_s2,
             kd: cfg.dynamics.kd_per_s,
             lockstep: cfg.lockstep,
-            stale_ns: (cfg.watchdog.stale_ms * 1e6) as u64,
+            stale_ns: cfg.watchdog.stale_ns(),
             effort,
             slew_per_tick,
             last_torque: None,
             bounds,
-            sp_seq: SeqTracker::new((cfg.watchdog.stale_ms * 1e6) as u64),
-            st_seq: SeqTracker::new((cfg.watchdog.stale_ms * 1e6) as u64),
+            sp_seq: SeqTracker::new(cfg.watchdog.stale_ns()),
+            st_seq: SeqTracker::new(cfg.watchdog.stale_ns()),
             state: None,
             torque_seq: 0,
             last_tick_value: None,
@@ -417,7 +417,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                     // Setpoint k needs measured state k−1. Its delivery to this subscriber
                     // can trail the planner's (the actuator may be preempted between
                     // subscribers on a shared CPU): wait for it, yielding, up to stale_ms.
-                    let give_up = monotonic_ns() + (cfg.watchdog.stale_ms * 1e6) as u64;
+                    let give_up = monotonic_ns() + cfg.watchdog.stale_ns();
                     while core.state_tick().is_none_or(|t| t + 1 < msg.header.tick)
                         && monotonic_ns() < give_up
                     {
@@ -457,9 +457,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let _ = core.accept_state(&msg, publisher, monotonic_ns());
             }
             let now = monotonic_ns();
-            if !cfg.lockstep
-                && now.saturating_sub(last_setpoint_ns) > (cfg.watchdog.stale_ms * 1e6) as u64
-            {
+            if !cfg.lockstep && now.saturating_sub(last_setpoint_ns) > cfg.watchdog.stale_ns() {
                 input_stale_periods += 1;
             }
         }

@@ -104,6 +104,14 @@ pub struct WatchdogConfig {
     pub ramp_ms: f64,
 }
 
+impl WatchdogConfig {
+    /// `stale_ms` in ns: the age at which input is stale, and the silence after which a
+    /// new publisher may take a stream over.
+    pub fn stale_ns(&self) -> u64 {
+        (self.stale_ms * 1e6) as u64
+    }
+}
+
 /// The smallest limit scale accepted, in the config and in motion commands: slower than
 /// 0.1 % of the robot's limits is no motion anyone asks for, and denormal limits break
 /// the planners' root finding (a fuzz corpus input found a panic at 1e-300).
