@@ -17,6 +17,10 @@ use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
 use anyhow::Context as _;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::service::ipc;
 use microrobot_messages::{
     JointSetpoint, ServiceKind, TorqueCommand, monotonic_ns, open_event, open_publish_subscribe,
 };
@@ -263,16 +267,29 @@ fn print_report(r: &ChainReport) {
     );
 }
 
-/// CPU time of this process (user + system), seconds, at microsecond resolution.
+/// What the relay and the sink do with a wake-up's samples.
+#[allow(clippy::large_enum_variant)] // one value per process, built once
+enum Hop {
+    /// Answer each setpoint with a torque command.
+    Relay {
+        sub: Subscriber<ipc::Service, JointSetpoint, ()>,
+        publisher: Publisher<ipc::Service, TorqueCommand, ()>,
+        notifier: Notifier<ipc::Service>,
+    },
+    /// Record each torque command's end-to-end latency.
+    Sink {
+        sub: Subscriber<ipc::Service, TorqueCommand, ()>,
+    },
+}
+
+/// A port of the chain, or an error naming it.
+fn port<T, E: std::fmt::Debug>(r: Result<T, E>, what: &str) -> anyhow::Result<T> {
+    r.map_err(|e| anyhow::anyhow!("{what}: {e:?}"))
+}
+
+/// CPU time of this process, seconds.
 fn cpu_time_s() -> f64 {
-    // SAFETY: an all-zero rusage is valid; getrusage fills it.
-    let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
-    // SAFETY: `ru` is a valid, writable rusage.
-    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut ru) } != 0 {
-        return 0.0;
-    }
-    let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-    s(ru.ru_utime) + s(ru.ru_stime)
+    microrobot_runtime::stats::cpu_time_ns() as f64 * 1e-9
 }
 
 fn run_link(
@@ -292,10 +309,6 @@ fn run_link(
     let sp_event = open_event(&node, instance, ServiceKind::Setpoint)?;
     let tq = open_publish_subscribe::<TorqueCommand>(&node, instance, ServiceKind::Torque)?;
     let tq_event = open_event(&node, instance, ServiceKind::Torque)?;
-    let ipc = |what: &str| {
-        let what = what.to_string();
-        move |e: &dyn std::fmt::Debug| anyhow::anyhow!("{what}: {e:?}")
-    };
     let period_ns = cfg.period_ns();
     let end_ticks = (duration_s * cfg.rate_hz).round().max(1.0) as u64;
     let mut hist = LatencyHistogram::new();
@@ -310,14 +323,8 @@ fn run_link(
     let (cpu0, wall0, cpu1, wall1);
     match link {
         Link::Source => {
-            let publisher = sp
-                .publisher_builder()
-                .create()
-                .map_err(|e| ipc("publisher")(&e))?;
-            let notifier = sp_event
-                .notifier_builder()
-                .create()
-                .map_err(|e| ipc("notifier")(&e))?;
+            let publisher = port(sp.publisher_builder().create(), "publisher")?;
+            let notifier = port(sp_event.notifier_builder().create(), "notifier")?;
             // Give the others' subscribers a moment to connect to the new publisher.
             std::thread::sleep(std::time::Duration::from_millis(100));
             ready();
@@ -357,41 +364,18 @@ fn run_link(
             std::thread::sleep(std::time::Duration::from_millis(50));
         }
         Link::Relay | Link::Sink => {
-            let (listener, relay_out) = if link == Link::Relay {
-                let sub = sp
-                    .subscriber_builder()
-                    .create()
-                    .map_err(|e| ipc("subscriber")(&e))?;
-                let pubr = tq
-                    .publisher_builder()
-                    .create()
-                    .map_err(|e| ipc("publisher")(&e))?;
-                let notifier = tq_event
-                    .notifier_builder()
-                    .create()
-                    .map_err(|e| ipc("notifier")(&e))?;
-                let l = sp_event
-                    .listener_builder()
-                    .create()
-                    .map_err(|e| ipc("listener")(&e))?;
-                (l, Some((sub, pubr, notifier)))
+            let (listener, hop) = if link == Link::Relay {
+                let hop = Hop::Relay {
+                    sub: port(sp.subscriber_builder().create(), "subscriber")?,
+                    publisher: port(tq.publisher_builder().create(), "publisher")?,
+                    notifier: port(tq_event.notifier_builder().create(), "notifier")?,
+                };
+                (port(sp_event.listener_builder().create(), "listener")?, hop)
             } else {
-                (
-                    tq_event
-                        .listener_builder()
-                        .create()
-                        .map_err(|e| ipc("listener")(&e))?,
-                    None,
-                )
-            };
-            let sink_sub = if link == Link::Sink {
-                Some(
-                    tq.subscriber_builder()
-                        .create()
-                        .map_err(|e| ipc("subscriber")(&e))?,
-                )
-            } else {
-                None
+                let hop = Hop::Sink {
+                    sub: port(tq.subscriber_builder().create(), "subscriber")?,
+                };
+                (port(tq_event.listener_builder().create(), "listener")?, hop)
             };
             ready();
             let mut reactor = Reactor::new()?;
@@ -410,29 +394,36 @@ fn run_link(
                 }
                 let _ = listener.try_wait(|_| {});
                 wakes += 1;
-                if let Some((sub, pubr, notifier)) = &relay_out {
-                    while let Ok(Some(s)) = sub.receive() {
-                        let h = s.header;
-                        drop(s);
-                        lost += h.seq.saturating_sub(last_seq + 1);
-                        last_seq = h.seq;
-                        let mut out = TorqueCommand::default();
-                        out.header.seq = h.seq;
-                        out.header.tick = h.tick;
-                        out.header.stamp_ns = monotonic_ns();
-                        out.header.source_stamp_ns = h.source_stamp_ns;
-                        if pubr.send_copy(out).is_ok() {
-                            let _ = notifier.notify();
+                match &hop {
+                    Hop::Relay {
+                        sub,
+                        publisher,
+                        notifier,
+                    } => {
+                        while let Ok(Some(s)) = sub.receive() {
+                            let h = s.header;
+                            drop(s);
+                            lost += h.seq.saturating_sub(last_seq + 1);
+                            last_seq = h.seq;
+                            let mut out = TorqueCommand::default();
+                            out.header.seq = h.seq;
+                            out.header.tick = h.tick;
+                            out.header.stamp_ns = monotonic_ns();
+                            out.header.source_stamp_ns = h.source_stamp_ns;
+                            if publisher.send_copy(out).is_ok() {
+                                let _ = notifier.notify();
+                            }
                         }
                     }
-                } else if let Some(sub) = &sink_sub {
-                    while let Ok(Some(s)) = sub.receive() {
-                        let now = monotonic_ns();
-                        let h = s.header;
-                        drop(s);
-                        hist.record(now.saturating_sub(h.source_stamp_ns));
-                        lost += h.seq.saturating_sub(last_seq + 1);
-                        last_seq = h.seq;
+                    Hop::Sink { sub } => {
+                        while let Ok(Some(s)) = sub.receive() {
+                            let now = monotonic_ns();
+                            let h = s.header;
+                            drop(s);
+                            hist.record(now.saturating_sub(h.source_stamp_ns));
+                            lost += h.seq.saturating_sub(last_seq + 1);
+                            last_seq = h.seq;
+                        }
                     }
                 }
             }

@@ -44,6 +44,11 @@ impl LatencyHistogram {
         self.hist.is_empty()
     }
 
+    /// Forgets every sample and keeps the buckets (no allocation).
+    pub fn reset(&mut self) {
+        self.hist.reset();
+    }
+
     /// Percentiles for the status message (zeros when empty).
     pub fn summary(&self) -> LatencySummary {
         if self.hist.is_empty() {
@@ -66,16 +71,21 @@ fn unreachable_hist() -> Histogram<u64> {
     Histogram::new(2).unwrap_or_else(|_| std::process::abort())
 }
 
-/// Process CPU time (ms, user + system) from `getrusage`.
-pub fn cpu_time_ms() -> u32 {
+/// Process CPU time (ns, user + system, microsecond resolution) from `getrusage`.
+pub fn cpu_time_ns() -> u64 {
     // SAFETY: an all-zero rusage is valid; getrusage fills it.
     let mut ru: libc::rusage = unsafe { std::mem::zeroed() };
     // SAFETY: `ru` is a valid, writable rusage.
     if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut ru) } != 0 {
         return 0;
     }
-    let ms = |t: libc::timeval| t.tv_sec as u64 * 1000 + t.tv_usec as u64 / 1000;
-    (ms(ru.ru_utime) + ms(ru.ru_stime)).min(u32::MAX as u64) as u32
+    let ns = |t: libc::timeval| t.tv_sec as u64 * 1_000_000_000 + t.tv_usec as u64 * 1000;
+    ns(ru.ru_utime) + ns(ru.ru_stime)
+}
+
+/// Process CPU time (ms, user + system), as the status message carries it.
+pub fn cpu_time_ms() -> u32 {
+    (cpu_time_ns() / 1_000_000).min(u32::MAX as u64) as u32
 }
 
 /// Reads the resident set size from `/proc/self/statm` through a kept-open fd into a
@@ -155,6 +165,32 @@ fn parse_statm_resident(b: &[u8]) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reset_forgets_every_sample_and_keeps_recording() {
+        let mut h = LatencyHistogram::new();
+        h.record(5_000);
+        h.record(7_000);
+        h.reset();
+        assert!(h.is_empty());
+        assert_eq!(h.summary().count, 0);
+        h.record(3_000);
+        assert_eq!(h.summary().count, 1);
+        assert!(h.summary().max_ns >= 3_000 && h.summary().max_ns < 3_010);
+    }
+
+    #[test]
+    fn cpu_time_grows_with_work_and_ms_follows_ns() {
+        let a = cpu_time_ns();
+        let mut x = 0u64;
+        for i in 0..20_000_000u64 {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(i);
+        }
+        std::hint::black_box(x);
+        let b = cpu_time_ns();
+        assert!(b > a, "{a} -> {b}");
+        assert!(u64::from(cpu_time_ms()) <= b / 1_000_000 + 1);
+    }
 
     #[test]
     fn histogram_summary_has_ordered_percentiles() {

@@ -240,7 +240,7 @@ pub fn floor_probe_windows(
     use std::sync::atomic::Ordering::Relaxed;
     let mut hist = crate::stats::LatencyHistogram::new();
     let mut window = crate::stats::LatencyHistogram::new();
-    let mut windows = Vec::new();
+    let mut windows = Vec::with_capacity(64); // a boundary pushes without allocating, up to 64
     let mut seen_epoch = epoch.map_or(0, |e| e.load(Relaxed));
     let mut clock = PeriodicClock::start(period_ns, overrun)?;
     let end = monotonic_ns() + duration_ns;
@@ -268,7 +268,7 @@ pub fn floor_probe_windows(
             seen_epoch = e;
             if !window.is_empty() {
                 windows.push(window.summary());
-                window = crate::stats::LatencyHistogram::new();
+                window.reset();
             }
         }
         if now >= end || stop.load(Relaxed) {
