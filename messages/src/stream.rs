@@ -139,4 +139,9 @@ pub mod state_flags {
     pub const SATURATED: u32 = 1 << 2;
     /// The applied torque's change was cut by the actuator's torque slope.
     pub const SLOPE_LIMITED: u32 = 1 << 3;
+    /// The backend's last state before its process stops (drives disabled, brakes on).
+    /// It repeats the tick of the state before it and is not a new period: a planner
+    /// ticking on states does not tick on it, and in lockstep the dynamics does not use
+    /// it as feedback (so where a run stops never changes what it computed).
+    pub const FINAL: u32 = 1 << 4;
 }

@@ -336,7 +336,9 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         if let Ok(m) = self.backend.read() {
             self.last_measured = m;
         }
-        self.state_message(now_ns)
+        let mut s = self.state_message(now_ns);
+        s.flags |= state_flags::FINAL;
+        s
     }
 
     /// The current measured state as a message (also used for the initial state).

@@ -26,7 +26,8 @@
 use anyhow::Context as _;
 use microrobot_messages::{
     Header, JointSetpoint, JointState, LifecycleState, MAX_JOINTS, ServiceKind, ServiceRole,
-    ServiceStatus, TorqueCommand, monotonic_ns, open_event, open_publish_subscribe, torque_flags,
+    ServiceStatus, TorqueCommand, monotonic_ns, open_event, open_publish_subscribe, state_flags,
+    torque_flags,
 };
 use microrobot_model::{JointVector, ModelData, Robot, mass_matrix, nonlinear_effects, rnea};
 use microrobot_runtime::config::PipelineConfig;
@@ -158,7 +159,12 @@ impl DynamicsCore {
             .and_then(|()| self.st_seq.accept(publisher, msg.header.seq, now_ns));
         match r {
             Ok(()) => {
-                self.state = Some(*msg);
+                // The actuator's final state repeats its last period's tick: in lockstep
+                // the setpoint of the next tick was computed from the state before it
+                // (whether or not the final one arrived first), so it is not kept.
+                if !(self.lockstep && msg.flags & state_flags::FINAL != 0) {
+                    self.state = Some(*msg);
+                }
                 Ok(())
             }
             Err(e) => {
@@ -409,17 +415,25 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 drop(s);
                 let _ = core.accept_state(&msg, publisher, monotonic_ns());
             }
-            while let Ok(Some(s)) = sp_sub.receive() {
+            // Once a stop is asked for, nothing new is computed (a torque from a state
+            // the shutdown cut off would differ from run to run).
+            while !shutdown.is_requested() {
+                let Ok(Some(s)) = sp_sub.receive() else {
+                    break;
+                };
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
                 if cfg.lockstep {
                     // Setpoint k needs measured state k−1. Its delivery to this subscriber
                     // can trail the planner's (the actuator may be preempted between
-                    // subscribers on a shared CPU): wait for it, yielding, up to stale_ms.
-                    let give_up = monotonic_ns() + cfg.watchdog.stale_ns();
+                    // subscribers on a shared CPU, by the other tests' pipelines in CI):
+                    // wait for it, yielding, up to fault_ms (after which the actuator
+                    // has latched its safe state anyway) or until a stop is asked for.
+                    let give_up = monotonic_ns() + cfg.watchdog.fault_ns();
                     while core.state_tick().is_none_or(|t| t + 1 < msg.header.tick)
                         && monotonic_ns() < give_up
+                        && !shutdown.is_requested()
                     {
                         match st_sub.receive() {
                             Ok(Some(s)) => {
@@ -430,6 +444,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                             }
                             _ => std::thread::yield_now(),
                         }
+                    }
+                    if shutdown.is_requested() {
+                        break;
                     }
                 }
                 let now = monotonic_ns();

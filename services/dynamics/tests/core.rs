@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use microrobot_dynamics::DynamicsCore;
-use microrobot_messages::{Header, JointSetpoint, JointState, torque_flags};
+use microrobot_messages::{Header, JointSetpoint, JointState, state_flags, torque_flags};
 use microrobot_model::{JointVector, ModelData, Robot, rnea};
 use microrobot_runtime::config::PipelineConfig;
 
@@ -102,6 +102,34 @@ fn lockstep_uses_only_state_k_minus_1() {
         0,
         "state 4 is not state 6"
     );
+}
+
+#[test]
+fn lockstep_feedback_ignores_the_actuators_final_state() {
+    // The final state repeats the last period's tick with the brakes on (here: a
+    // different q). Whether it arrives before or after the next setpoint, that setpoint
+    // gets the same torque, computed from the state of the running arm.
+    let c = cfg(true);
+    let robot = Robot::from_file(&c.robot).unwrap();
+    let torque = |final_first: bool| {
+        let mut d = DynamicsCore::new(&robot, &c);
+        d.accept_state(&state(1, 4, 0, Q), 9, 0).unwrap();
+        let mut last = state(2, 4, 0, [0.0; 6]);
+        last.flags = state_flags::FINAL;
+        if final_first {
+            d.accept_state(&last, 9, 0).unwrap();
+        }
+        let t = d.compute(&sp(5, 0, Q, [0.0; 6]), 1, 0).unwrap();
+        if !final_first {
+            d.accept_state(&last, 9, 0).unwrap();
+        }
+        t
+    };
+    let (a, b) = (torque(true), torque(false));
+    assert_ne!(a.flags & torque_flags::FEEDBACK, 0);
+    assert_eq!(a.state_seq, 1, "the running arm's state, not the final one");
+    assert_eq!(a.flags, b.flags);
+    assert_eq!(a.tau, b.tau);
 }
 
 #[test]

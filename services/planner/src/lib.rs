@@ -2,7 +2,8 @@
 //! motion and publishes one joint setpoint (q, q̇, q̈, jerk).
 //!
 //! * Clock: its own timerfd at `rate_hz` on absolute deadlines (default), or, in
-//!   lockstep, one tick per measured-state message from the actuator.
+//!   lockstep, one tick per measured-state message from the actuator (not on its
+//!   `FINAL` state: that repeats the last period's tick as the actuator stops).
 //! * Start: from the actuator's measured state (history 1 on State): at rest, or, when a
 //!   restarted planner finds the arm moving, a jerk-limited stop from its measured q and
 //!   q̇ (the program is not run); mirroring it when the actuator is in its safe state.
@@ -995,7 +996,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
-                if core.accept_state(&msg, publisher, monotonic_ns()) && on_states {
+                let new_period = msg.flags & state_flags::FINAL == 0;
+                if core.accept_state(&msg, publisher, monotonic_ns()) && on_states && new_period {
                     let now = monotonic_ns();
                     if !cfg.lockstep {
                         // The state's stamp is the master clock's tick: lateness is the

@@ -110,6 +110,11 @@ impl WatchdogConfig {
     pub fn stale_ns(&self) -> u64 {
         (self.stale_ms * 1e6) as u64
     }
+
+    /// `fault_ms` in ns: the silence after which the actuator latches its safe state.
+    pub fn fault_ns(&self) -> u64 {
+        (self.fault_ms * 1e6) as u64
+    }
 }
 
 /// The smallest limit scale accepted, in the config and in motion commands: slower than
