@@ -92,24 +92,31 @@ macro_rules! multiversion {
 }
 pub(crate) use multiversion;
 
-/// Evaluates `$body` with `$n` bound to the joint count `$dof`: as the constant
-/// 6 for six-joint arms (the seed arm), so that the compiler unrolls every
-/// joint loop and drops their bounds checks, and as a run-time value otherwise.
-macro_rules! for_dof {
-    ($dof:expr, |$n:ident| $body:expr) => {
-        match $dof {
-            6 => {
-                let $n: usize = 6;
+/// Evaluates `$body` with `$n` bound to the joint count and `$plain` to
+/// `Robot::plain` (every joint revolute, no products of inertia about the frame
+/// origins, no friction): as constants for six-joint arms, (6, true) for plain ones
+/// like the seed arm and (6, false) for the others, so that the compiler unrolls
+/// every joint loop, drops their bounds checks and, for plain arms, the branches for
+/// prismatic joints, full inertia tensors and friction; as run-time values otherwise.
+macro_rules! for_shape {
+    ($robot:expr, |$n:ident, $plain:ident| $body:expr) => {
+        match ($robot.dof, $robot.plain) {
+            (6, true) => {
+                let ($n, $plain): (usize, bool) = (6, true);
                 $body
             }
-            dof => {
-                let $n: usize = dof;
+            (6, false) => {
+                let ($n, $plain): (usize, bool) = (6, false);
+                $body
+            }
+            (dof, plain) => {
+                let ($n, $plain): (usize, bool) = (dof, plain);
                 $body
             }
         }
     };
 }
-pub(crate) use for_dof;
+pub(crate) use for_shape;
 
 #[cfg(all(test, target_arch = "x86_64"))]
 mod tests {

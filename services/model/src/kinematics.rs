@@ -3,25 +3,27 @@
 //! smallest singular value, rank.
 
 use crate::data::ModelData;
-use crate::isa::{Isa, for_dof, multiversion};
+use crate::isa::{Isa, for_shape, multiversion};
 use crate::math::Pose;
 use crate::robot::{Robot, Twist};
 use crate::{Jacobian, JointVector, MAX_JOINTS};
 use nalgebra::{Isometry3, Matrix3, SMatrix, Vector3};
 
-/// Evaluates `cos θ_i`, `sin θ_i` and `d_i` of the `n = dof` joints for `q` into `data`.
+/// Evaluates `cos θ_i`, `sin θ_i` and `d_i` of the `n = dof` joints for `q` into `data`
+/// (`plain`: `robot.plain`, every joint revolute).
 #[inline(always)]
 pub(crate) fn update_joint_values<S: Isa>(
     robot: &Robot,
     data: &mut ModelData,
     q: &JointVector,
     n: usize,
+    plain: bool,
 ) {
     let n = n.min(MAX_JOINTS);
     let mut theta = [0.0; MAX_JOINTS];
     for i in 0..n {
         let jc = &robot.consts[i];
-        if jc.revolute {
+        if plain || jc.revolute {
             theta[i] = jc.theta0 + q[i];
             data.d[i] = jc.d0;
         } else {
@@ -98,8 +100,8 @@ pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData, n: usize) {
 
 #[inline(always)]
 pub(crate) fn update_kinematics_with<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) {
-    for_dof!(robot.dof, |n| {
-        update_joint_values::<S>(robot, data, q, n);
+    for_shape!(robot, |n, plain| {
+        update_joint_values::<S>(robot, data, q, n, plain);
         update_frames(robot, data, n)
     })
 }
@@ -126,10 +128,10 @@ pub(crate) fn jacobian_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> Jacobian {
-    for_dof!(robot.dof, |n| {
-        update_joint_values::<S>(robot, data, q, n);
+    for_shape!(robot, |n, plain| {
+        update_joint_values::<S>(robot, data, q, n, plain);
         update_frames(robot, data, n);
-        jacobian_of_frames(robot, data, n)
+        jacobian_of_frames(robot, data, n, plain)
     })
 }
 
@@ -159,18 +161,18 @@ multiversion! {
 /// The Jacobian from the frames already in `data`.
 #[inline(always)]
 pub(crate) fn jacobian_from_frames(robot: &Robot, data: &ModelData) -> Jacobian {
-    jacobian_of_frames(robot, data, robot.dof)
+    jacobian_of_frames(robot, data, robot.dof, robot.plain)
 }
 
-/// [`jacobian_from_frames`] for the first `n = dof` joints.
+/// [`jacobian_from_frames`] for the first `n = dof` joints (`plain`: `robot.plain`).
 #[inline(always)]
-fn jacobian_of_frames(robot: &Robot, data: &ModelData, n: usize) -> Jacobian {
+fn jacobian_of_frames(robot: &Robot, data: &ModelData, n: usize, plain: bool) -> Jacobian {
     let mut jac = Jacobian::zeros();
     let p = data.tool.translation;
     for j in 0..n.min(MAX_JOINTS) {
         let f = &data.frames[j];
         let z: Vector3<f64> = f.rotation.column(2).into_owned();
-        if robot.consts[j].revolute {
+        if plain || robot.consts[j].revolute {
             let v = z.cross(&(p - f.translation));
             jac.fixed_view_mut::<3, 1>(0, j).copy_from(&v);
             jac.fixed_view_mut::<3, 1>(3, j).copy_from(&z);

@@ -305,6 +305,8 @@ pub(crate) struct Body {
     pub h_kind: Sparsity,
     /// Diagonal of `inertia_origin` when it has no products of inertia.
     pub diagonal_inertia: Option<Vector3<f64>>,
+    /// Diagonal of `inertia_origin` (the whole tensor when `diagonal_inertia` is set).
+    pub inertia_diag: Vector3<f64>,
 }
 
 impl Default for Body {
@@ -328,6 +330,7 @@ impl Body {
             diagonal_inertia: (inertia_origin
                 == Matrix3::from_diagonal(&inertia_origin.diagonal()))
             .then(|| inertia_origin.diagonal()),
+            inertia_diag: inertia_origin.diagonal(),
         }
     }
 }
@@ -343,6 +346,10 @@ pub struct Robot {
     payload: Option<LinkInertia>,
     pub(crate) dof: usize,
     pub(crate) tool_is_identity: bool,
+    /// Every joint revolute, every body's inertia about its frame origin diagonal,
+    /// no friction: the hot paths are compiled for this shape without the branches
+    /// for the other cases (see `isa::for_shape`).
+    pub(crate) plain: bool,
     pub(crate) consts: [JointConst; MAX_JOINTS],
     pub(crate) bodies: [Body; MAX_JOINTS],
 }
@@ -396,6 +403,13 @@ impl Robot {
             bodies[i] = Body::from_link(&link);
         }
         let tool_is_identity = tool == Pose::IDENTITY;
+        let plain = (0..dof).all(|i| {
+            let jc = &consts[i];
+            jc.revolute
+                && jc.viscous == 0.0
+                && jc.coulomb == 0.0
+                && bodies[i].diagonal_inertia.is_some()
+        });
         Ok(Robot {
             name: name.into(),
             gravity,
@@ -404,6 +418,7 @@ impl Robot {
             payload,
             dof,
             tool_is_identity,
+            plain,
             consts,
             bodies,
         })

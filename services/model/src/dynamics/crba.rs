@@ -7,7 +7,7 @@
 //! The DH twist's signed permutations make most rotations free.
 
 use crate::data::ModelData;
-use crate::isa::{Isa, for_dof, multiversion};
+use crate::isa::{Isa, for_shape, multiversion};
 use crate::kinematics::update_joint_values;
 use crate::math::joint_rot;
 use crate::robot::{JointConst, Robot, Twist};
@@ -112,9 +112,9 @@ pub(crate) fn mass_matrix_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> MassMatrix {
-    for_dof!(robot.dof, |n| {
-        update_joint_values::<S>(robot, data, q, n);
-        mass_matrix_from_joint_values(robot, data, n)
+    for_shape!(robot, |n, plain| {
+        update_joint_values::<S>(robot, data, q, n, plain);
+        mass_matrix_from_joint_values(robot, data, n, plain)
     });
     data.mass
 }
@@ -186,13 +186,19 @@ impl CarryColumns {
     }
 }
 
-/// CRBA on the joint values already in `data`; result in `data.mass`.
+/// CRBA on the joint values already in `data`; result in `data.mass` (`plain`:
+/// `robot.plain`, every joint revolute).
 ///
 /// The columns `M_{·j}` of the joints beyond the current one are carried down
 /// the chain together, one joint at a time: they are independent, so the CPU
 /// overlaps them instead of waiting on one column's chain of rotations.
 #[inline(always)]
-pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData, n: usize) {
+pub(crate) fn mass_matrix_from_joint_values(
+    robot: &Robot,
+    data: &mut ModelData,
+    n: usize,
+    plain: bool,
+) {
     let n = n.min(MAX_JOINTS);
     let mass = &mut data.mass;
     *mass = MassMatrix::zeros();
@@ -206,6 +212,7 @@ pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData,
     let mut col_force = [Vector3::zeros(); MAX_JOINTS];
     for i in (0..n).rev() {
         let jc = &robot.consts[i];
+        let revolute = plain || jc.revolute;
         let (c, s, d) = (data.cos[i], data.sin[i], data.d[i]);
         // Carry the pending columns from frame i + 1 to frame i, with the twist's
         // rotation chosen once for all of them.
@@ -217,7 +224,7 @@ pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData,
             s,
             d,
             offset: jc.offset,
-            revolute: jc.revolute,
+            revolute,
         };
         match jc.twist {
             Twist::Zero => carry.run(mass, &mut col_force, &mut col_moment, |v| *v),
@@ -260,12 +267,12 @@ pub(crate) fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData,
         }
         // Spatial force of the composite for unit motion of joint i (z axis of
         // frame i): moment about O_i and force.
-        let (moment, force) = if jc.revolute {
+        let (moment, force) = if revolute {
             (inertia.column_z(), Vector3::new(-h.y, h.x, 0.0))
         } else {
             (Vector3::new(h.y, -h.x, 0.0), Vector3::new(0.0, 0.0, m))
         };
-        mass[(i, i)] = if jc.revolute { moment.z } else { force.z } + jc.rotor;
+        mass[(i, i)] = if revolute { moment.z } else { force.z } + jc.rotor;
         col_force[i] = force;
         col_moment[i] = moment;
     }

@@ -5,7 +5,7 @@
 use super::crba::mass_matrix_from_joint_values;
 use super::rnea::{RneaTerms, rnea_from_joint_values};
 use crate::data::ModelData;
-use crate::isa::{Isa, for_dof, multiversion};
+use crate::isa::{Isa, for_shape, multiversion};
 use crate::kinematics::update_joint_values;
 use crate::robot::Robot;
 use crate::{JointVector, MAX_JOINTS};
@@ -77,12 +77,12 @@ pub(crate) fn try_forward_dynamics_with<S: Isa>(
     qd: &JointVector,
     tau: &JointVector,
 ) -> Result<JointVector, DynamicsError> {
-    for_dof!(robot.dof, |n| solve_forward_dynamics::<S>(
-        robot, data, q, qd, tau, n
+    for_shape!(robot, |n, plain| solve_forward_dynamics::<S>(
+        robot, data, q, qd, tau, n, plain
     ))
 }
 
-/// [`try_forward_dynamics`] for the `n = dof` joints.
+/// [`try_forward_dynamics`] for the `n = dof` joints (`plain`: `robot.plain`).
 #[inline(always)]
 fn solve_forward_dynamics<S: Isa>(
     robot: &Robot,
@@ -91,11 +91,12 @@ fn solve_forward_dynamics<S: Isa>(
     qd: &JointVector,
     tau: &JointVector,
     n: usize,
+    plain: bool,
 ) -> Result<JointVector, DynamicsError> {
     // n <= MAX_JOINTS lets the compiler drop the bounds checks below.
     let n = n.min(MAX_JOINTS);
-    update_joint_values::<S>(robot, data, q, n);
-    mass_matrix_from_joint_values(robot, data, n);
+    update_joint_values::<S>(robot, data, q, n, plain);
+    mass_matrix_from_joint_values(robot, data, n, plain);
     // Factor before the RNEA: the pivots' divisions are a long dependency chain
     // that the CPU can overlap with the independent RNEA work that follows.
     // M is symmetric, so its column-major storage reads as rows too.
@@ -111,6 +112,7 @@ fn solve_forward_dynamics<S: Isa>(
             friction: true,
         },
         n,
+        plain,
     );
     let mut x = [0.0; MAX_JOINTS];
     for i in 0..n {

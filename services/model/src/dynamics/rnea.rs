@@ -2,7 +2,7 @@
 //! accelerations outward from the base, forces and moments inward from the tip.
 
 use crate::data::ModelData;
-use crate::isa::{Isa, for_dof, multiversion};
+use crate::isa::{Isa, for_shape, multiversion};
 use crate::kinematics::update_joint_values;
 use crate::math::{cross_sparse, joint_rot, joint_rot_t, point_accel};
 use crate::robot::{Robot, Sparsity, Twist, friction};
@@ -29,9 +29,9 @@ pub(crate) fn rnea_with<S: Isa>(
     qd: &JointVector,
     qdd: &JointVector,
 ) -> JointVector {
-    for_dof!(robot.dof, |n| {
-        update_joint_values::<S>(robot, data, q, n);
-        rnea_from_joint_values(robot, data, qd, qdd, ALL, n)
+    for_shape!(robot, |n, plain| {
+        update_joint_values::<S>(robot, data, q, n, plain);
+        rnea_from_joint_values(robot, data, qd, qdd, ALL, n, plain)
     })
 }
 
@@ -42,9 +42,9 @@ pub(crate) fn nonlinear_effects_with<S: Isa>(
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
-    for_dof!(robot.dof, |n| {
-        update_joint_values::<S>(robot, data, q, n);
-        rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), ALL, n)
+    for_shape!(robot, |n, plain| {
+        update_joint_values::<S>(robot, data, q, n, plain);
+        rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), ALL, n, plain)
     })
 }
 
@@ -54,14 +54,14 @@ pub(crate) fn gravity_torque_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> JointVector {
-    for_dof!(robot.dof, |n| {
-        update_joint_values::<S>(robot, data, q, n);
+    for_shape!(robot, |n, plain| {
+        update_joint_values::<S>(robot, data, q, n, plain);
         let zero = JointVector::zeros();
         let terms = RneaTerms {
             gravity: true,
             friction: false,
         };
-        rnea_from_joint_values(robot, data, &zero, &zero, terms, n)
+        rnea_from_joint_values(robot, data, &zero, &zero, terms, n, plain)
     })
 }
 
@@ -72,13 +72,13 @@ pub(crate) fn coriolis_torque_with<S: Isa>(
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
-    for_dof!(robot.dof, |n| {
-        update_joint_values::<S>(robot, data, q, n);
+    for_shape!(robot, |n, plain| {
+        update_joint_values::<S>(robot, data, q, n, plain);
         let terms = RneaTerms {
             gravity: false,
             friction: false,
         };
-        rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), terms, n)
+        rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), terms, n, plain)
     })
 }
 
@@ -123,7 +123,8 @@ multiversion! {
     ) -> JointVector => coriolis_torque_with;
 }
 
-/// RNEA on joint values already evaluated into `data` (`cos`, `sin`, `d`).
+/// RNEA on joint values already evaluated into `data` (`cos`, `sin`, `d`); `plain`
+/// is `robot.plain` (a constant where the caller is specialised by `for_shape!`).
 ///
 /// Forward pass in frame `i` (origin `O_i`, `p*` = `O_i` from `O_{i-1}` in frame
 /// `i` = `(a, d sα, d cα)`, `z = Rᵀ ẑ = (0, sα, cα)`): angular velocity `w`,
@@ -140,6 +141,7 @@ pub(crate) fn rnea_from_joint_values(
     qdd: &JointVector,
     terms: RneaTerms,
     n: usize,
+    plain: bool,
 ) -> JointVector {
     let n = n.min(MAX_JOINTS);
     let mut w = Vector3::zeros();
@@ -153,7 +155,7 @@ pub(crate) fn rnea_from_joint_values(
         let jc = &robot.consts[i];
         let (c, s) = (data.cos[i], data.sin[i]);
         let (dq, ddq) = (qd[i], qdd[i]);
-        if jc.revolute {
+        if plain || jc.revolute {
             let wp = Vector3::new(w.x, w.y, w.z + dq);
             let wdp = Vector3::new(wd.x + w.y * dq, wd.y - w.x * dq, wd.z + ddq);
             w = joint_rot_t(jc, c, s, &wp);
@@ -174,9 +176,13 @@ pub(crate) fn rnea_from_joint_values(
                 + point_accel(&w, &wd, &pstar, Sparsity::General);
         }
         let b = &robot.bodies[i];
-        let (iw, iwd) = match &b.diagonal_inertia {
-            Some(diag) => (diag.component_mul(&w), diag.component_mul(&wd)),
-            None => (b.inertia_origin * w, b.inertia_origin * wd),
+        let (iw, iwd) = match (plain, &b.diagonal_inertia) {
+            (true, _) => (
+                b.inertia_diag.component_mul(&w),
+                b.inertia_diag.component_mul(&wd),
+            ),
+            (false, Some(diag)) => (diag.component_mul(&w), diag.component_mul(&wd)),
+            (false, None) => (b.inertia_origin * w, b.inertia_origin * wd),
         };
         if b.h_kind == Sparsity::Zero {
             data.force[i] = acc * b.mass;
@@ -195,7 +201,7 @@ pub(crate) fn rnea_from_joint_values(
         let (c, s) = (data.cos[i], data.sin[i]);
         let f = data.force[i] + f_child;
         // Moment about O_{i-1}: + p* × f = − f × p*.
-        let m = if jc.revolute {
+        let m = if plain || jc.revolute {
             let m = data.moment[i] + n_child;
             if jc.pstar_kind == Sparsity::Zero {
                 m
@@ -214,13 +220,13 @@ pub(crate) fn rnea_from_joint_values(
             Twist::MinusQuarter => -v.y,
             Twist::General => jc.sa * v.y + jc.ca * v.z,
         };
-        let t = if jc.revolute {
+        let t = if plain || jc.revolute {
             along_axis(&m)
         } else {
             along_axis(&f)
         };
         let mut extra = jc.rotor * qdd[i];
-        if terms.friction && (jc.viscous != 0.0 || jc.coulomb != 0.0) {
+        if !plain && terms.friction && (jc.viscous != 0.0 || jc.coulomb != 0.0) {
             extra += friction(jc.viscous, jc.coulomb, qd[i]);
         }
         tau[i] = t + extra;
