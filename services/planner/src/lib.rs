@@ -704,13 +704,16 @@ impl PlannerCore {
                 }
             }
         } else {
+            // The sample goes straight into `current` (no 256-byte return value).
+            let (dt, current) = (self.period_s, &mut self.current);
             let step = if self.program_running {
-                self.program.as_mut().and_then(|p| p.update(self.period_s))
+                self.program
+                    .as_mut()
+                    .and_then(|p| p.update_into(dt, current))
             } else {
-                self.motion.as_mut().map(|g| g.update(self.period_s))
+                self.motion.as_mut().map(|g| g.update_into(dt, current))
             };
-            if let Some((status, sample)) = step {
-                self.current = sample;
+            if let Some(status) = step {
                 flags |= setpoint_flags::MOVING;
                 if status == Status::Finished {
                     self.motion = None;

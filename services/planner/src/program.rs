@@ -64,9 +64,10 @@ impl ProgramRunner {
         self.runner.as_ref().map_or(0.0, |r| r.duration())
     }
 
-    /// Advances by `dt`; `None` when nothing is planned.
+    /// Advances by `dt`, writing the sample into `out`; `None` (and `out` untouched)
+    /// when nothing is planned.
     #[inline]
-    pub fn update(&mut self, dt: f64) -> Option<(Status, Sample)> {
-        self.runner.as_mut().map(|r| r.update(dt))
+    pub fn update_into(&mut self, dt: f64, out: &mut Sample) -> Option<Status> {
+        self.runner.as_mut().map(|r| r.update_into(dt, out))
     }
 }

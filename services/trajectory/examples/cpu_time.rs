@@ -99,16 +99,17 @@ fn main() {
         if g.time() > 5.0 {
             g.replace(tr);
         }
-        black_box(g.update(black_box(0.001)));
+        black_box(g.update_into(black_box(0.001), &mut kept));
+        black_box(&mut kept);
     });
     println!("thread CPU time per call (mean, best of 15 rounds)");
     println!("  trajectory/plan_rest_to_rest_6  {:8.1} ns", r2r_ns);
     println!("  trajectory/plan_from_state_6    {:8.1} ns", fs_ns);
-    println!("  trajectory/sample_6             {:8.1} ns", sample_ns);
     println!(
-        "  trajectory/sample_into_6        {:8.1} ns",
+        "  trajectory/sample_6 (in place)  {:8.1} ns",
         sample_into_ns
     );
+    println!("  trajectory/sample_by_value_6    {:8.1} ns", sample_ns);
     println!("  trajectory/generator_update_6   {:8.1} ns", gen_ns);
 
     let many = common::random_from_state(n_problems);

@@ -32,17 +32,33 @@ impl Generator {
         self.at(self.t + dt)
     }
 
+    /// [`Generator::update`] written into `out` (every lane): the per-cycle form.
+    /// A returned 256-byte `Sample` is copied with wide loads from the narrow stores
+    /// that wrote it, which cannot be forwarded and stall (measured: 26–28 ns by
+    /// value against 21 ns in place for the same instructions).
+    #[inline]
+    pub fn update_into(&mut self, dt: f64, out: &mut Sample) -> Status {
+        self.at_into(self.t + dt, out)
+    }
+
     /// Jumps to time `t` (s since the start) and returns that sample.
     #[inline]
     pub fn at(&mut self, t: f64) -> (Status, Sample) {
+        let mut s = Sample::default();
+        let status = self.at_into(t, &mut s);
+        (status, s)
+    }
+
+    /// [`Generator::at`] written into `out` (every lane).
+    #[inline]
+    pub fn at_into(&mut self, t: f64, out: &mut Sample) -> Status {
         self.t = t;
-        let s = self.trajectory.sample(t);
-        let status = if t >= self.trajectory.duration() {
+        self.trajectory.sample_into(t, out);
+        if t >= self.trajectory.duration() {
             Status::Finished
         } else {
             Status::Working
-        };
-        (status, s)
+        }
     }
 
     /// The current sample (without advancing).

@@ -517,13 +517,21 @@ impl ProgramRunner {
 
     /// Advances by `dt` seconds; `Finished` once the last segment has ended.
     pub fn update(&mut self, dt: f64) -> (Status, Sample) {
+        let mut s = Sample::default();
+        let status = self.update_into(dt, &mut s);
+        (status, s)
+    }
+
+    /// [`ProgramRunner::update`] written into `out` (every lane): the per-cycle form
+    /// (see [`crate::Generator::update_into`]).
+    pub fn update_into(&mut self, dt: f64, out: &mut Sample) -> Status {
         let mut t = self.generator.time() + dt;
         while self.index + 1 < self.segments.len() && t >= self.segments[self.index].hand_over {
             t -= self.segments[self.index].hand_over;
             self.index += 1;
             self.generator.replace(self.segments[self.index].trajectory);
         }
-        self.generator.at(t)
+        self.generator.at_into(t, out)
     }
 
     /// Index of the running segment.

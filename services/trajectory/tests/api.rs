@@ -4,8 +4,8 @@
 mod common;
 use common::*;
 use microrobot_trajectory::{
-    Generator, JointState, MotionRequest, Profile, Status, Trajectory, TrajectoryError,
-    minimum_duration, stop_trajectory,
+    Generator, JointState, JointVector, MotionRequest, Profile, Sample, Status, Trajectory,
+    TrajectoryError, minimum_duration, stop_trajectory,
 };
 
 fn one(profile: Profile, q0: f64, q1: f64) -> MotionRequest {
@@ -242,6 +242,34 @@ fn generator_steps_and_replans_without_jumps() {
     assert_eq!(last.q[0], -0.5);
     let copy: Trajectory = *g.trajectory(); // Copy, no heap.
     assert_eq!(copy.sample(0.25), g.trajectory().sample(0.25));
+}
+
+#[test]
+fn in_place_stepping_equals_stepping_by_value_and_overwrites_every_lane() {
+    let tr = Trajectory::plan(&one(SOFT, 0.0, 1.0)).expect("plans");
+    let (mut by_value, mut in_place) = (Generator::new(tr), Generator::new(tr));
+    // A kept sample full of garbage: every lane must be written (zero past dof).
+    let mut out = Sample {
+        q: JointVector::repeat(f64::NAN),
+        qd: JointVector::repeat(7.0),
+        qdd: JointVector::repeat(-3.0),
+        jerk: JointVector::repeat(f64::INFINITY),
+    };
+    for _ in 0..1500 {
+        let (status, s) = by_value.update(1e-3);
+        assert_eq!(in_place.update_into(1e-3, &mut out), status);
+        for (a, b) in [
+            (s.q, out.q),
+            (s.qd, out.qd),
+            (s.qdd, out.qdd),
+            (s.jerk, out.jerk),
+        ] {
+            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+        }
+    }
+    assert_eq!(in_place.at_into(1e9, &mut out), Status::Finished);
+    assert_eq!(out.q[0], 1.0);
+    assert!(out.q.iter().skip(1).all(|&x| x == 0.0));
 }
 
 #[test]
