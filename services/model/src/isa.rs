@@ -162,13 +162,7 @@ mod tests {
             out
         }
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/robots");
-        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::test_support::uniform(0x9e37_79b9_7f4a_7c15);
         for file in ["seed-arm.toml", "spherical-rrp.toml", "planar-2r.toml"] {
             let robot = Robot::from_file(&dir.join(file)).unwrap_or_else(|e| panic!("{e}"));
             let mut data = ModelData::new(&robot);

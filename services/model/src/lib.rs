@@ -75,3 +75,18 @@ pub type Jacobian = nalgebra::SMatrix<f64, 6, MAX_JOINTS>;
 
 /// Joint-space mass (inertia) matrix, symmetric, zero outside the `dof` block.
 pub type MassMatrix = nalgebra::SMatrix<f64, MAX_JOINTS, MAX_JOINTS>;
+
+/// Helpers shared by the unit tests.
+#[cfg(test)]
+pub(crate) mod test_support {
+    /// Uniform numbers in [0, 1) from a xorshift64 generator seeded with `seed`
+    /// (repeatable, no dependency).
+    pub(crate) fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+}

@@ -42,41 +42,16 @@ mod tests {
             let mut d = ModelData::new(r);
             let [q, qd, qdd] = s;
             let mut out = Vec::new();
-            out.extend(
-                super::rnea(r, &mut d, q, qd, qdd)
-                    .iter()
-                    .map(|x| x.to_bits()),
-            );
-            out.extend(
-                super::nonlinear_effects(r, &mut d, q, qd)
-                    .iter()
-                    .map(|x| x.to_bits()),
-            );
-            out.extend(
-                super::gravity_torque(r, &mut d, q)
-                    .iter()
-                    .map(|x| x.to_bits()),
-            );
-            out.extend(
-                super::coriolis_torque(r, &mut d, q, qd)
-                    .iter()
-                    .map(|x| x.to_bits()),
-            );
-            out.extend(super::mass_matrix(r, &mut d, q).iter().map(|x| x.to_bits()));
-            out.extend(
-                super::forward_dynamics(r, &mut d, q, qd, qdd)
-                    .iter()
-                    .map(|x| x.to_bits()),
-            );
+            let mut bits = |v: &[f64]| out.extend(v.iter().map(|x| x.to_bits()));
+            bits(super::rnea(r, &mut d, q, qd, qdd).as_slice());
+            bits(super::nonlinear_effects(r, &mut d, q, qd).as_slice());
+            bits(super::gravity_torque(r, &mut d, q).as_slice());
+            bits(super::coriolis_torque(r, &mut d, q, qd).as_slice());
+            bits(super::mass_matrix(r, &mut d, q).as_slice());
+            bits(super::forward_dynamics(r, &mut d, q, qd, qdd).as_slice());
             out
         };
-        let mut seed = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = crate::test_support::uniform(0x2545_f491_4f6c_dd1d);
         for _ in 0..200 {
             let mut s = [JointVector::zeros(); 3];
             for i in 0..seed_arm.dof() {
