@@ -303,10 +303,10 @@ pub(crate) struct Body {
     pub inertia_origin: Matrix3<f64>,
     /// Sparsity of `h` (`Zero`: the centre of mass is at the frame origin).
     pub h_kind: Sparsity,
-    /// Diagonal of `inertia_origin` when it has no products of inertia.
-    pub diagonal_inertia: Option<Vector3<f64>>,
-    /// Diagonal of `inertia_origin` (the whole tensor when `diagonal_inertia` is set).
+    /// Diagonal of `inertia_origin`.
     pub inertia_diag: Vector3<f64>,
+    /// `inertia_origin` has no products of inertia: `inertia_diag` is all of it.
+    pub diagonal: bool,
 }
 
 impl Default for Body {
@@ -327,10 +327,8 @@ impl Body {
             h: c * l.mass,
             inertia_origin,
             h_kind: Sparsity::of(&(c * l.mass)),
-            diagonal_inertia: (inertia_origin
-                == Matrix3::from_diagonal(&inertia_origin.diagonal()))
-            .then(|| inertia_origin.diagonal()),
             inertia_diag: inertia_origin.diagonal(),
+            diagonal: inertia_origin == Matrix3::from_diagonal(&inertia_origin.diagonal()),
         }
     }
 }
@@ -405,10 +403,7 @@ impl Robot {
         let tool_is_identity = tool == Pose::IDENTITY;
         let plain = (0..dof).all(|i| {
             let jc = &consts[i];
-            jc.revolute
-                && jc.viscous == 0.0
-                && jc.coulomb == 0.0
-                && bodies[i].diagonal_inertia.is_some()
+            jc.revolute && jc.viscous == 0.0 && jc.coulomb == 0.0 && bodies[i].diagonal
         });
         Ok(Robot {
             name: name.into(),

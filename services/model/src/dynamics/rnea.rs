@@ -176,13 +176,13 @@ pub(crate) fn rnea_from_joint_values(
                 + point_accel(&w, &wd, &pstar, Sparsity::General);
         }
         let b = &robot.bodies[i];
-        let (iw, iwd) = match (plain, &b.diagonal_inertia) {
-            (true, _) => (
+        let (iw, iwd) = if plain || b.diagonal {
+            (
                 b.inertia_diag.component_mul(&w),
                 b.inertia_diag.component_mul(&wd),
-            ),
-            (false, Some(diag)) => (diag.component_mul(&w), diag.component_mul(&wd)),
-            (false, None) => (b.inertia_origin * w, b.inertia_origin * wd),
+            )
+        } else {
+            (b.inertia_origin * w, b.inertia_origin * wd)
         };
         if b.h_kind == Sparsity::Zero {
             data.force[i] = acc * b.mass;
