@@ -9,6 +9,7 @@ use microrobot_messages::{MasterPose, setpoint_flags};
 use microrobot_model::Robot;
 use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::stats::LatencyHistogram;
+use microrobot_runtime::validate::StreamOwner;
 use microrobot_teleop::{Hand, TeleopController, TeleopSettings, flags};
 use microrobot_trajectory::{KinematicLimits, Sample};
 use nalgebra::{Rotation3, Vector3};
@@ -35,8 +36,9 @@ pub struct TeleopCounters {
 pub struct TeleopMode {
     controller: Result<TeleopController, String>,
     timeout_ns: u64,
-    /// The device followed (its iceoryx2 publisher) and when its last sample arrived.
-    device: Option<(u128, u64)>,
+    /// The device followed (its iceoryx2 publisher); another takes over after
+    /// `master_timeout_ms` of silence.
+    device: StreamOwner,
     latest: Option<MasterPose>,
     used_seq: Option<u64>,
     refused_since_tick: bool,
@@ -90,10 +92,11 @@ impl TeleopMode {
             Sample::default(),
         )
         .map_err(|e| e.to_string());
+        let timeout_ns = (cfg.teleop.master_timeout_ms * 1e6) as u64;
         Self {
             controller,
-            timeout_ns: (cfg.teleop.master_timeout_ms * 1e6) as u64,
-            device: None,
+            timeout_ns,
+            device: StreamOwner::new(timeout_ns),
             latest: None,
             used_seq: None,
             refused_since_tick: false,
@@ -113,19 +116,19 @@ impl TeleopMode {
     /// long a silence (the master is stale and the tool already holds) the next device
     /// takes over, from its own samples only.
     pub fn on_master(&mut self, m: &MasterPose, publisher: u128, now_ns: u64) -> bool {
-        let second = self.device.is_some_and(|(p, last)| {
-            p != publisher && now_ns.saturating_sub(last) < self.timeout_ns
-        });
+        let admitted = self.device.admits(publisher, now_ns);
+        let second = admitted.is_err();
         if second || !m.is_valid() || m.stamp_ns > now_ns.saturating_add(1_000_000_000) {
             self.counters.refused += 1;
             self.counters.second_device += u64::from(second);
             self.refused_since_tick = true;
             return false;
         }
-        if self.device.is_some_and(|(p, _)| p != publisher) {
+        if admitted == Ok(true) {
+            // A new device: nothing of the previous one's is used.
             self.latest = None;
         }
-        self.device = Some((publisher, now_ns));
+        self.device.accepted(publisher, now_ns);
         if self.latest.is_none_or(|l| l.stamp_ns <= m.stamp_ns) {
             self.latest = Some(*m);
         }

@@ -37,26 +37,69 @@ impl Refusal {
     }
 }
 
-/// Per-stream sequence tracking: refuses duplicates and reordering, counts gaps as lost
-/// messages, and follows one publisher at a time.
+/// The one publisher a stream follows (messages/README.md, "One publisher per stream").
 ///
-/// A stream has one publisher (messages/README.md). A message from another one is
-/// refused ([`Refusal::SecondPublisher`]) while the current one is live, i.e. its last
-/// accepted message is younger than the takeover time (the stage's `stale_ms`), so a
-/// stray or rogue second publisher cannot interleave its messages with the pipeline's.
-/// Once the current publisher has been silent that long (it died, or was killed and the
-/// supervisor restarts it), the next publisher takes the stream over and its sequence
-/// starts afresh.
+/// A message from another publisher is refused ([`Refusal::SecondPublisher`]) while
+/// the current one is live, i.e. its last accepted message is younger than the
+/// takeover time, so a stray or rogue second publisher cannot interleave its messages
+/// with the stream's. Once the current publisher has been silent that long (it died,
+/// or was killed and the supervisor restarts it), the next one takes the stream over.
+/// Used by [`SeqTracker`] for the bus streams and by the teleop master stream.
 #[derive(Debug, Clone, Copy)]
-pub struct SeqTracker {
+pub struct StreamOwner {
     publisher: Option<u128>,
-    last: Option<u64>,
     last_accepted_ns: u64,
     takeover_ns: u64,
+    /// Times another publisher took the stream over (restarts seen).
+    pub changes: u64,
+}
+
+impl StreamOwner {
+    /// An owner that another publisher may replace after `takeover_ns` of silence.
+    pub fn new(takeover_ns: u64) -> Self {
+        Self {
+            publisher: None,
+            last_accepted_ns: 0,
+            takeover_ns,
+            changes: 0,
+        }
+    }
+
+    /// Whether a message from `publisher` at `now_ns` may be taken: `Ok(false)` from
+    /// the current publisher, `Ok(true)` from a new one (the first, or one taking over
+    /// a silent stream), [`Refusal::SecondPublisher`] while another one is live.
+    /// Nothing changes until [`StreamOwner::accepted`].
+    #[inline]
+    pub fn admits(&self, publisher: u128, now_ns: u64) -> Result<bool, Refusal> {
+        match self.publisher {
+            Some(p) if p == publisher => Ok(false),
+            Some(_) if now_ns.saturating_sub(self.last_accepted_ns) < self.takeover_ns => {
+                Err(Refusal::SecondPublisher)
+            }
+            _ => Ok(true),
+        }
+    }
+
+    /// A message from `publisher` (admitted) was accepted at `now_ns`.
+    #[inline]
+    pub fn accepted(&mut self, publisher: u128, now_ns: u64) {
+        if self.publisher.is_some_and(|p| p != publisher) {
+            self.changes += 1;
+        }
+        self.publisher = Some(publisher);
+        self.last_accepted_ns = now_ns;
+    }
+}
+
+/// Per-stream sequence tracking: refuses duplicates and reordering, counts gaps as lost
+/// messages, and follows one publisher at a time ([`StreamOwner`]; the takeover time is
+/// the stage's `stale_ms`). A publisher taking over starts its sequence afresh.
+#[derive(Debug, Clone, Copy)]
+pub struct SeqTracker {
+    owner: StreamOwner,
+    last: Option<u64>,
     /// Messages missing between accepted ones (gaps).
     pub lost: u64,
-    /// Times another publisher took the stream over (restarts seen).
-    pub publisher_changes: u64,
 }
 
 impl SeqTracker {
@@ -64,12 +107,9 @@ impl SeqTracker {
     /// silence from the current one.
     pub fn new(takeover_ns: u64) -> Self {
         Self {
-            publisher: None,
+            owner: StreamOwner::new(takeover_ns),
             last: None,
-            last_accepted_ns: 0,
-            takeover_ns,
             lost: 0,
-            publisher_changes: 0,
         }
     }
 
@@ -77,26 +117,22 @@ impl SeqTracker {
     /// `now_ns`; on success it becomes the last accepted one.
     #[inline]
     pub fn accept(&mut self, publisher: u128, seq: u64, now_ns: u64) -> Result<(), Refusal> {
-        if self.publisher != Some(publisher) {
-            if self.publisher.is_some() {
-                if now_ns.saturating_sub(self.last_accepted_ns) < self.takeover_ns {
-                    return Err(Refusal::SecondPublisher);
-                }
-                self.publisher_changes += 1;
+        let new_publisher = self.owner.admits(publisher, now_ns)?;
+        if !new_publisher {
+            match self.last {
+                Some(l) if seq <= l => return Err(Refusal::OutOfOrder),
+                Some(l) => self.lost += seq - l - 1,
+                None => {}
             }
-            self.publisher = Some(publisher);
-            self.last = Some(seq);
-            self.last_accepted_ns = now_ns;
-            return Ok(());
-        }
-        match self.last {
-            Some(l) if seq <= l => return Err(Refusal::OutOfOrder),
-            Some(l) => self.lost += seq - l - 1,
-            None => {}
         }
         self.last = Some(seq);
-        self.last_accepted_ns = now_ns;
+        self.owner.accepted(publisher, now_ns);
         Ok(())
+    }
+
+    /// Times another publisher took the stream over (restarts seen).
+    pub fn publisher_changes(&self) -> u64 {
+        self.owner.changes
     }
 
     /// Last accepted sequence number.
@@ -200,11 +236,11 @@ mod tests {
         assert_eq!(t.accept(2, 0, 1_049), Err(Refusal::SecondPublisher));
         t.accept(1, 101, 1_049).unwrap();
         assert_eq!(t.accept(2, 1, 1_098), Err(Refusal::SecondPublisher));
-        assert_eq!(t.publisher_changes, 0);
+        assert_eq!(t.publisher_changes(), 0);
         assert_eq!(t.last(), Some(101));
         // Silent for the takeover time: the next publisher takes over, sequence afresh.
         assert_eq!(t.accept(2, 7, 1_099), Ok(()));
-        assert_eq!(t.publisher_changes, 1);
+        assert_eq!(t.publisher_changes(), 1);
         assert_eq!(t.accept(2, 8, 1_100), Ok(()));
         assert_eq!(t.lost, 0);
         // And now the old one is the second publisher.
