@@ -39,7 +39,7 @@ use microrobot_messages::{
 };
 use microrobot_model::ik::{IkOptions, IkTarget};
 use microrobot_model::{ModelData, Robot};
-use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::config::{PipelineConfig, ms_to_ns};
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::{Refusal, SeqTracker, check_fresh, check_state};
 use microrobot_runtime::{BadConfig, PeriodicClock, Reactor, Shutdown, StatusPort, open_node};
@@ -222,7 +222,7 @@ impl PlannerCore {
             period_s: 1.0 / cfg.rate_hz,
             lockstep: cfg.lockstep,
             stale_ns: cfg.watchdog.stale_ns(),
-            command_max_age_ns: (cfg.planner.command_max_age_ms * 1e6) as u64,
+            command_max_age_ns: ms_to_ns(cfg.planner.command_max_age_ms),
             limits: scaled(robot, cfg.planner.limit_scale),
             full_limits: scaled(robot, 1.0),
             estop_limits: scaled(robot, cfg.planner.estop_limit_scale),
@@ -853,7 +853,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     status.publish(monotonic_ns(), &mut st);
 
     // Wait for the actuator's measured state (history 1).
-    let deadline = monotonic_ns() + (cfg.planner.state_timeout_ms * 1e6) as u64;
+    let deadline = monotonic_ns() + ms_to_ns(cfg.planner.state_timeout_ms);
     while !core.started() {
         if shutdown.is_requested() {
             status.publish_final(&mut st);

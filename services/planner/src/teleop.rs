@@ -7,7 +7,7 @@
 
 use microrobot_messages::{MasterPose, setpoint_flags};
 use microrobot_model::Robot;
-use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::config::{PipelineConfig, ms_to_ns};
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::StreamOwner;
 use microrobot_teleop::{Hand, TeleopController, TeleopSettings, flags};
@@ -92,7 +92,7 @@ impl TeleopMode {
             Sample::default(),
         )
         .map_err(|e| e.to_string());
-        let timeout_ns = (cfg.teleop.master_timeout_ms * 1e6) as u64;
+        let timeout_ns = ms_to_ns(cfg.teleop.master_timeout_ms);
         Self {
             controller,
             timeout_ns,

@@ -104,16 +104,23 @@ pub struct WatchdogConfig {
     pub ramp_ms: f64,
 }
 
+/// A configured time in ms as CLOCK_MONOTONIC ns (the loops' unit); the config's
+/// ranges keep it finite and non-negative.
+#[inline]
+pub fn ms_to_ns(ms: f64) -> u64 {
+    (ms * 1e6) as u64
+}
+
 impl WatchdogConfig {
     /// `stale_ms` in ns: the age at which input is stale, and the silence after which a
     /// new publisher may take a stream over.
     pub fn stale_ns(&self) -> u64 {
-        (self.stale_ms * 1e6) as u64
+        ms_to_ns(self.stale_ms)
     }
 
     /// `fault_ms` in ns: the silence after which the actuator latches its safe state.
     pub fn fault_ns(&self) -> u64 {
-        (self.fault_ms * 1e6) as u64
+        ms_to_ns(self.fault_ms)
     }
 }
 

@@ -45,7 +45,7 @@ impl StatusPort {
             publisher,
             notifier,
             rss: RssReader::new(),
-            period_ns: (period_ms * 1e6) as u64,
+            period_ns: crate::config::ms_to_ns(period_ms),
             next_due_ns: 0,
             seq: 0,
             role,

@@ -28,8 +28,8 @@ impl Watchdog {
     /// Thresholds in ms (as configured).
     pub fn new(stale_ms: f64, fault_ms: f64) -> Self {
         Self {
-            stale_ns: (stale_ms * 1e6) as u64,
-            fault_ns: (fault_ms * 1e6) as u64,
+            stale_ns: crate::config::ms_to_ns(stale_ms),
+            fault_ns: crate::config::ms_to_ns(fault_ms),
             last_ns: None,
         }
     }
