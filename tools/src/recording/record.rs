@@ -12,7 +12,8 @@
 //! pipeline to miss nothing. It stops on SIGINT/SIGTERM, after `--duration`, or with
 //! `--until-finalized` once planner, dynamics and actuator each published their final
 //! status; it then finishes the file (summary, indexes) and prints one JSON line on
-//! stdout: messages and sequence gaps per topic, largest receive lag.
+//! stdout: messages, sequence gaps and messages sent before the first recorded one per
+//! topic, largest receive lag.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
@@ -66,6 +67,12 @@ pub struct RecordSummary {
     pub messages: BTreeMap<String, u64>,
     /// Messages missing between received ones per topic (sequence gaps, per publisher).
     pub gaps: BTreeMap<String, u64>,
+    /// Messages each publisher sent before the first one recorded from it, per topic
+    /// (its first `seq` − 1: the contract numbers every cyclic stream from 1). Lost if the
+    /// recorder was subscribed before that publisher started (its queue overflowed while
+    /// it was held off); not yet subscribed if it attached to a running pipeline. Motion
+    /// commands are stamped, not numbered from 1, and count 0 here.
+    pub before_first: BTreeMap<String, u64>,
     /// Largest receive time − message stamp, µs.
     pub max_lag_us: f64,
     /// Whether the resolved pipeline config was attached.
@@ -101,6 +108,12 @@ impl Payload {
             Payload::Command(m) => (m.seq, m.stamp_ns),
             Payload::Status(m) => (m.seq, m.stamp_ns),
         }
+    }
+
+    /// Whether the contract numbers this stream from 1 per publisher (every cyclic
+    /// stream; motion commands carry their sender's stamp as `seq`).
+    fn numbered_from_one(&self) -> bool {
+        !matches!(self, Payload::Command(_))
     }
 
     fn json(&self) -> serde_json::Value {
@@ -229,6 +242,7 @@ impl Writer {
         for t in TOPICS {
             summary.messages.insert(t.to_string(), 0);
             summary.gaps.insert(t.to_string(), 0);
+            summary.before_first.insert(t.to_string(), 0);
         }
         Ok(Self {
             mcap,
@@ -242,10 +256,18 @@ impl Writer {
     fn write(&mut self, r: &Received) -> Result<()> {
         let t = r.payload.topic();
         let (seq, stamp) = r.payload.seq_and_stamp();
-        if let Some(last) = self.last_seq[t].insert(r.publisher, seq)
-            && seq > last + 1
-        {
-            *self.summary.gaps.entry(TOPICS[t].into()).or_default() += seq - last - 1;
+        match self.last_seq[t].insert(r.publisher, seq) {
+            Some(last) if seq > last + 1 => {
+                *self.summary.gaps.entry(TOPICS[t].into()).or_default() += seq - last - 1;
+            }
+            None if r.payload.numbered_from_one() => {
+                *self
+                    .summary
+                    .before_first
+                    .entry(TOPICS[t].into())
+                    .or_default() += seq.saturating_sub(1);
+            }
+            _ => {}
         }
         let lag_us = r.recv_ns.saturating_sub(stamp) as f64 / 1000.0;
         self.summary.max_lag_us = self.summary.max_lag_us.max(lag_us);
@@ -444,12 +466,14 @@ pub fn main(args: RecordArgs) -> Result<()> {
     let mut summary = written?;
     summary.duration_s = monotonic_ns().saturating_sub(start) as f64 / 1e9;
     let gaps: u64 = summary.gaps.values().sum();
+    let before: u64 = summary.before_first.values().sum();
     eprintln!(
-        "recorded {} messages to {} in {:.1} s ({} lost to sequence gaps)",
+        "recorded {} messages to {} in {:.1} s ({} lost to sequence gaps, {} sent before the first recorded)",
         summary.messages.values().sum::<u64>(),
         summary.file,
         summary.duration_s,
-        gaps
+        gaps,
+        before
     );
     println!(
         "{}",
@@ -462,4 +486,68 @@ pub fn main(args: RecordArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn setpoint(seq: u64) -> Payload {
+        let mut m = JointSetpoint::default();
+        m.header.seq = seq;
+        Payload::Setpoint(m)
+    }
+
+    fn writer(dir: &std::path::Path) -> Writer {
+        Writer::create(&RecordArgs {
+            instance: "unit".into(),
+            out: dir.join("unit.mcap"),
+            duration: None,
+            ready_file: None,
+            until_finalized: false,
+            rt_priority: 0,
+        })
+        .expect("writer")
+    }
+
+    fn write(w: &mut Writer, payload: Payload, publisher: u128) {
+        w.write(&Received {
+            payload,
+            publisher,
+            recv_ns: 0,
+        })
+        .expect("write");
+    }
+
+    /// What a publisher sent before the first recorded message and what went missing
+    /// between recorded ones are both counted, per publisher, and add up to its last seq.
+    #[test]
+    fn losses_at_the_head_and_in_the_middle_are_both_reported() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut w = writer(dir.path());
+        // Publisher 7: the first 4 overwritten before the recorder drained, then 10..=12 lost.
+        for seq in [5, 6, 7, 8, 9, 13, 14] {
+            write(&mut w, setpoint(seq), 7);
+        }
+        // Publisher 8 (a restarted planner) numbers from 1 again: nothing missing.
+        for seq in 1..=3 {
+            write(&mut w, setpoint(seq), 8);
+        }
+        // Motion commands carry the sender's stamp as seq: never counted as missing.
+        let c = MotionCommand {
+            seq: 1_000_000,
+            ..Default::default()
+        };
+        write(&mut w, Payload::Command(c), 9);
+        let s = w.finish("unit-no-such-instance").expect("finish");
+        assert_eq!(s.messages["setpoint"], 10);
+        assert_eq!(s.before_first["setpoint"], 4);
+        assert_eq!(s.gaps["setpoint"], 3);
+        assert_eq!(
+            s.messages["setpoint"] + s.before_first["setpoint"] + s.gaps["setpoint"],
+            14 + 3
+        );
+        assert_eq!(s.before_first["command"], 0);
+        assert_eq!(s.gaps["command"], 0);
+    }
 }
