@@ -13,6 +13,7 @@ use std::time::Duration;
 
 use common::continuity::{
     Limits, segments, setpoint_jumps, state_at, torque_peak, torque_slew, torque_step_bound,
+    unexplained_torque_steps,
 };
 use common::*;
 use microrobot_messages::{
@@ -22,6 +23,10 @@ use microrobot_messages::{
 const STALE_MS: f64 = 50.0;
 const FAULT_MS: f64 = 200.0;
 const RAMP_MS: f64 = 20.0;
+/// The default of `actuator.torque_slope_ms` (full effort in this long): the largest
+/// applied-torque change per plant step that either torque limit lets through (the
+/// dynamics' slew limit, `torque_slew_ms` = 20 ms, is half of it per tick).
+const TORQUE_SLOPE_MS: f64 = 10.0;
 const PERIOD_S: f64 = 1e-3;
 /// How long the victim is silent before it dies: longer than `fault_ms`, and than the
 /// planner's stop from the move's speed (about 1.1 s).
@@ -157,17 +162,21 @@ fn common_checks(c: &Case, victim: ServiceRole) {
         "{}: torque slew healthy {healthy:.3?}, whole run {slew:.3?}, bound {bound:.3?}, peak {peak:.3?}",
         victim.name()
     );
-    for j in 0..lim.dof {
-        assert!(
-            slew[j] <= bound[j],
-            "joint {}: torque step {} N·m per step > bound {} (healthy {}, peak {})",
-            j + 1,
-            slew[j],
-            bound[j],
-            healthy[j],
-            peak[j]
-        );
-    }
+    // Beyond the bound only as a ramp some flag explains (a host stall lets the
+    // free-running arm drift under a held torque; feedback then corrects a real error at
+    // the slew limit: CI once saw 2.5 N·m per step on joints 1 and 2, the slew limit).
+    let cap: Vec<f64> = lim
+        .effort
+        .iter()
+        .map(|e| e * PERIOD_S / (TORQUE_SLOPE_MS * 1e-3))
+        .collect();
+    let ramp_steps = (RAMP_MS * 1e-3 / PERIOD_S).round() as usize;
+    let steps = unexplained_torque_steps(st, &c.streams.torques, &bound, &cap, ramp_steps, running);
+    assert!(
+        steps.is_empty(),
+        "torque steps (healthy {healthy:?}, peak {peak:?}):\n{}",
+        steps.join("\n")
+    );
 
     // Resumed from the measured state: the first moving setpoint after the reset starts
     // where the arm is.

@@ -2,7 +2,9 @@
 //! and the period (never from timing): the setpoint stream must not jump in q, q̇ or q̈,
 //! the applied torque must not step.
 
-use microrobot_messages::{JointSetpoint, JointState, setpoint_flags};
+use microrobot_messages::{
+    JointSetpoint, JointState, TorqueCommand, setpoint_flags, state_flags, torque_flags,
+};
 use microrobot_model::Robot;
 
 /// Per-joint limits of the robot under test (SI).
@@ -169,6 +171,71 @@ pub fn torque_slew(
             }
             for (j, o) in out.iter_mut().enumerate() {
                 *o = o.max((w[1].tau_applied[j] - w[0].tau_applied[j]).abs());
+            }
+        }
+    }
+    out
+}
+
+/// The applied-torque steps (between consecutive states of one actuator process that
+/// `keep` accepts) larger than `bound[j]` that no flagged event explains. Torque never
+/// steps: beyond the healthy-motion bound a change must be at most `cap[j]` (the most the
+/// dynamics' slew limit and the actuator's torque slope let through in one step) and lie
+/// within `ramp_steps` states after something the streams flag — a command cut to the
+/// slew limit (`SLEW_LIMITED`), a slope-limited step (`SLOPE_LIMITED`), or a switch of
+/// the actuator's law (`COMMAND_STALE`, `SAFE_STATE`: the blend back to the commands then
+/// runs over `ramp_steps`). That is what a host stall looks like: the free-running arm
+/// drifts open-loop under a held torque and feedback corrects a real error as a ramp.
+/// One line per violation.
+pub fn unexplained_torque_steps(
+    states: &[JointState],
+    torques: &[TorqueCommand],
+    bound: &[f64],
+    cap: &[f64],
+    ramp_steps: usize,
+    keep: impl Fn(&JointState) -> bool,
+) -> Vec<String> {
+    // The command a state applied: the newest one with its `torque_seq` stamped before it
+    // (a restarted dynamics numbers from 1 again).
+    let applied = |s: &JointState| {
+        torques
+            .iter()
+            .rev()
+            .find(|t| t.header.seq == s.torque_seq && t.header.stamp_ns <= s.header.stamp_ns)
+    };
+    let mut out = Vec::new();
+    for seg in segments(states, |s| s.header.seq) {
+        let flagged: Vec<bool> = seg
+            .iter()
+            .map(|s| {
+                s.flags
+                    & (state_flags::SLOPE_LIMITED
+                        | state_flags::COMMAND_STALE
+                        | state_flags::SAFE_STATE)
+                    != 0
+                    || applied(s).is_some_and(|t| t.flags & torque_flags::SLEW_LIMITED != 0)
+            })
+            .collect();
+        for i in 2..seg.len() {
+            let (a, b) = (&seg[i - 1], &seg[i]);
+            if !keep(a) || !keep(b) {
+                continue;
+            }
+            let explained = flagged[i.saturating_sub(ramp_steps)..=i].iter().any(|f| *f);
+            for (j, (lo, hi)) in bound.iter().zip(cap).enumerate() {
+                let d = (b.tau_applied[j] - a.tau_applied[j]).abs();
+                if d > *lo && (!explained || d > hi * (1.0 + 1e-9)) {
+                    out.push(format!(
+                        "joint {}: applied torque {:.4} -> {:.4} N·m (step {d:.4} > healthy bound {lo:.4}, cap {hi:.4}) at state seq {} (lifecycle {}, flags {:#x}; a flag in the last {ramp_steps} states: {explained}), command {:?}",
+                        j + 1,
+                        a.tau_applied[j],
+                        b.tau_applied[j],
+                        b.header.seq,
+                        b.lifecycle,
+                        b.flags,
+                        applied(b).map(|t| (t.header.seq, t.tau[j], t.flags)),
+                    ));
+                }
             }
         }
     }
