@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use common::continuity::{
     Limits, segments, setpoint_jumps, state_at, torque_peak, torque_slew, torque_step_bound,
-    unexplained_torque_steps,
+    torque_steps,
 };
 use common::*;
 use microrobot_messages::{
@@ -162,20 +162,24 @@ fn common_checks(c: &Case, victim: ServiceRole) {
         "{}: torque slew healthy {healthy:.3?}, whole run {slew:.3?}, bound {bound:.3?}, peak {peak:.3?}",
         victim.name()
     );
-    // Beyond the bound only as a ramp some flag explains (a host stall lets the
-    // free-running arm drift under a held torque; feedback then corrects a real error at
-    // the slew limit: CI once saw 2.5 N·m per step on joints 1 and 2, the slew limit).
-    let cap: Vec<f64> = lim
-        .effort
-        .iter()
-        .map(|e| e * PERIOD_S / (TORQUE_SLOPE_MS * 1e-3))
-        .collect();
+    // Beyond the bound only within the limits and after an event the streams show (a
+    // host stall lets the free-running arm drift under a held torque; feedback then
+    // corrects a real error: CI saw 2.5 N·m per step on joints 1 and 2, the slew limit,
+    // and once 1.25 N·m in one step 1.8 s after a restart, with no flag).
+    let cap = lim.torque_step_cap(PERIOD_S, TORQUE_SLOPE_MS);
     let ramp_steps = (RAMP_MS * 1e-3 / PERIOD_S).round() as usize;
-    let steps = unexplained_torque_steps(st, &c.streams.torques, &bound, &cap, ramp_steps, running);
+    let steps = torque_steps(st, &c.streams.torques, &bound, &cap, ramp_steps, running);
+    eprintln!(
+        "{}: applied-torque steps beyond the bound {} (after a flag {}, after a late command {})",
+        victim.name(),
+        steps.beyond_bound,
+        steps.after_flag,
+        steps.after_late_command
+    );
     assert!(
-        steps.is_empty(),
+        steps.violations.is_empty(),
         "torque steps (healthy {healthy:?}, peak {peak:?}):\n{}",
-        steps.join("\n")
+        steps.violations.join("\n")
     );
 
     // Resumed from the measured state: the first moving setpoint after the reset starts

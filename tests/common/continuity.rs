@@ -35,6 +35,16 @@ impl Limits {
             effort: f(|j| j.limits.effort),
         }
     }
+
+    /// The largest torque change per step of `period_s` that a limit of "full effort in
+    /// `full_scale_ms`" lets through (the dynamics' `torque_slew_ms`, the actuator's
+    /// `torque_slope_ms`), per joint.
+    pub fn torque_step_cap(&self, period_s: f64, full_scale_ms: f64) -> Vec<f64> {
+        self.effort
+            .iter()
+            .map(|e| e * period_s / (full_scale_ms * 1e-3))
+            .collect()
+    }
 }
 
 /// Splits a stream into the runs of one publisher each: a new run starts wherever the
@@ -177,24 +187,40 @@ pub fn torque_slew(
     out
 }
 
+/// What [`torque_steps`] found.
+#[derive(Debug, Default)]
+pub struct TorqueStepReport {
+    /// Steps (joint × state) beyond the healthy-motion bound.
+    pub beyond_bound: usize,
+    /// Of those, explained by a flag in the ramp window before them.
+    pub after_flag: usize,
+    /// Of those, explained only by a late command in the ramp window (a state that did
+    /// not apply the next command: the arm ran open-loop under a held torque).
+    pub after_late_command: usize,
+    /// The rest: real steps, one line each.
+    pub violations: Vec<String>,
+}
+
 /// The applied-torque steps (between consecutive states of one actuator process that
-/// `keep` accepts) larger than `bound[j]` that no flagged event explains. Torque never
-/// steps: beyond the healthy-motion bound a change must be at most `cap[j]` (the most the
-/// dynamics' slew limit and the actuator's torque slope let through in one step) and lie
-/// within `ramp_steps` states after something the streams flag — a command cut to the
-/// slew limit (`SLEW_LIMITED`), a slope-limited step (`SLOPE_LIMITED`), or a switch of
-/// the actuator's law (`COMMAND_STALE`, `SAFE_STATE`: the blend back to the commands then
-/// runs over `ramp_steps`). That is what a host stall looks like: the free-running arm
-/// drifts open-loop under a held torque and feedback corrects a real error as a ramp.
-/// One line per violation.
-pub fn unexplained_torque_steps(
+/// `keep` accepts) beyond the healthy-motion `bound[j]`. Torque never steps: such a
+/// change must be at most `cap[j]` (the most the dynamics' slew limit and the actuator's
+/// torque slope let through in one step) and lie within `ramp_steps` states after an
+/// event that explains it, read from the streams, not from timing:
+/// * a flag: a command cut to the slew limit (`SLEW_LIMITED`), a slope-limited step
+///   (`SLOPE_LIMITED`), or a switch of the actuator's law (`COMMAND_STALE`,
+///   `SAFE_STATE`; the blend back to the commands runs over `ramp_steps`);
+/// * a late command: a state that did not apply the command after its predecessor's
+///   (held or skipped `torque_seq`). That is a host stall as the streams see it: the
+///   free-running arm drifted open-loop under a held torque, and feedback then corrects
+///   a real error, within the limits but faster than healthy motion.
+pub fn torque_steps(
     states: &[JointState],
     torques: &[TorqueCommand],
     bound: &[f64],
     cap: &[f64],
     ramp_steps: usize,
     keep: impl Fn(&JointState) -> bool,
-) -> Vec<String> {
+) -> TorqueStepReport {
     // The command a state applied: the newest one with its `torque_seq` stamped before it
     // (a restarted dynamics numbers from 1 again).
     let applied = |s: &JointState| {
@@ -203,7 +229,7 @@ pub fn unexplained_torque_steps(
             .rev()
             .find(|t| t.header.seq == s.torque_seq && t.header.stamp_ns <= s.header.stamp_ns)
     };
-    let mut out = Vec::new();
+    let mut out = TorqueStepReport::default();
     for seg in segments(states, |s| s.header.seq) {
         let flagged: Vec<bool> = seg
             .iter()
@@ -216,23 +242,38 @@ pub fn unexplained_torque_steps(
                     || applied(s).is_some_and(|t| t.flags & torque_flags::SLEW_LIMITED != 0)
             })
             .collect();
+        let late: Vec<bool> = (0..seg.len())
+            .map(|i| i > 0 && seg[i].torque_seq != seg[i - 1].torque_seq.wrapping_add(1))
+            .collect();
         for i in 2..seg.len() {
             let (a, b) = (&seg[i - 1], &seg[i]);
             if !keep(a) || !keep(b) {
                 continue;
             }
-            let explained = flagged[i.saturating_sub(ramp_steps)..=i].iter().any(|f| *f);
+            let window = i.saturating_sub(ramp_steps)..=i;
+            let after_flag = flagged[window.clone()].iter().any(|f| *f);
+            let after_late = late[window].iter().any(|f| *f);
             for (j, (lo, hi)) in bound.iter().zip(cap).enumerate() {
                 let d = (b.tau_applied[j] - a.tau_applied[j]).abs();
-                if d > *lo && (!explained || d > hi * (1.0 + 1e-9)) {
-                    out.push(format!(
-                        "joint {}: applied torque {:.4} -> {:.4} N·m (step {d:.4} > healthy bound {lo:.4}, cap {hi:.4}) at state seq {} (lifecycle {}, flags {:#x}; a flag in the last {ramp_steps} states: {explained}), command {:?}",
+                if d <= *lo {
+                    continue;
+                }
+                out.beyond_bound += 1;
+                if d <= hi * (1.0 + 1e-9) && after_flag {
+                    out.after_flag += 1;
+                } else if d <= hi * (1.0 + 1e-9) && after_late {
+                    out.after_late_command += 1;
+                } else {
+                    out.violations.push(format!(
+                        "joint {}: applied torque {:.4} -> {:.4} N·m (step {d:.4} > healthy bound {lo:.4}, cap {hi:.4}) at state seq {} (lifecycle {}, flags {:#x}, torque_seq {} after {}; a flag in the last {ramp_steps} states: {after_flag}, a late command: {after_late}), command {:?}",
                         j + 1,
                         a.tau_applied[j],
                         b.tau_applied[j],
                         b.header.seq,
                         b.lifecycle,
                         b.flags,
+                        b.torque_seq,
+                        a.torque_seq,
                         applied(b).map(|t| (t.header.seq, t.tau[j], t.flags)),
                     ));
                 }
