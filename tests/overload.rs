@@ -176,7 +176,8 @@ fn saturated_cores_degrade_the_pipeline_visibly_but_never_make_it_jump() {
     // A stall of tens of ms lets the free-running arm drift open-loop under the held torque;
     // feedback then corrects a real error. The correction reaches the arm as a ramp: the
     // dynamics' slew limit per tick of logical time, then the actuator's torque slope per
-    // plant step — both flagged. Beyond the healthy-motion bound only with those flags.
+    // plant step — both flagged. Beyond the healthy-motion bound only within those limits
+    // and after a flag or a late command (`torque_steps`).
     for seg in segments(&streams.torques, |t| t.header.seq) {
         for w in seg.windows(2) {
             let ticks = w[1].header.tick.saturating_sub(w[0].header.tick).max(1) as f64;

@@ -231,14 +231,17 @@ fn lockstep_run_recorded_exported_plotted_and_replayed_bit_for_bit() {
             .collect::<Vec<_>>()
     };
     // Numbered from 1: the last seq recorded is everything the stage published.
-    let last = |v: Vec<u64>| v.last().copied().unwrap_or(0);
+    let (setpoint_seqs, torque_seqs) = (seqs("setpoint"), seqs("torque"));
     assert_eq!(
-        last(seqs("setpoint")),
-        count("setpoint") + missing("setpoint")
+        setpoint_seqs.last().copied(),
+        Some(count("setpoint") + missing("setpoint"))
     );
-    assert_eq!(last(seqs("torque")), count("torque") + missing("torque"));
     assert_eq!(
-        seqs("setpoint").first().copied(),
+        torque_seqs.last().copied(),
+        Some(count("torque") + missing("torque"))
+    );
+    assert_eq!(
+        setpoint_seqs.first().copied(),
         Some(before_first("setpoint") + 1)
     );
     assert_eq!(topics["setpoint"][0]["q"].as_array().map(Vec::len), Some(6));

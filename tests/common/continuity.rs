@@ -2,6 +2,8 @@
 //! and the period (never from timing): the setpoint stream must not jump in q, q̇ or q̈,
 //! the applied torque must not step.
 
+use std::collections::HashMap;
+
 use microrobot_messages::{
     JointSetpoint, JointState, TorqueCommand, setpoint_flags, state_flags, torque_flags,
 };
@@ -222,46 +224,51 @@ pub fn torque_steps(
     keep: impl Fn(&JointState) -> bool,
 ) -> TorqueStepReport {
     // The command a state applied: the newest one with its `torque_seq` stamped before it
-    // (a restarted dynamics numbers from 1 again).
+    // (a restarted dynamics numbers from 1 again). Indexed once by seq, in stream order.
+    let mut by_seq: HashMap<u64, Vec<&TorqueCommand>> = HashMap::new();
+    for t in torques {
+        by_seq.entry(t.header.seq).or_default().push(t);
+    }
     let applied = |s: &JointState| {
-        torques
+        by_seq
+            .get(&s.torque_seq)?
             .iter()
             .rev()
-            .find(|t| t.header.seq == s.torque_seq && t.header.stamp_ns <= s.header.stamp_ns)
+            .find(|t| t.header.stamp_ns <= s.header.stamp_ns)
+            .copied()
     };
+    let ramp_flags =
+        state_flags::SLOPE_LIMITED | state_flags::COMMAND_STALE | state_flags::SAFE_STATE;
     let mut out = TorqueStepReport::default();
     for seg in segments(states, |s| s.header.seq) {
-        let flagged: Vec<bool> = seg
-            .iter()
-            .map(|s| {
-                s.flags
-                    & (state_flags::SLOPE_LIMITED
-                        | state_flags::COMMAND_STALE
-                        | state_flags::SAFE_STATE)
-                    != 0
-                    || applied(s).is_some_and(|t| t.flags & torque_flags::SLEW_LIMITED != 0)
-            })
-            .collect();
-        let late: Vec<bool> = (0..seg.len())
-            .map(|i| i > 0 && seg[i].torque_seq != seg[i - 1].torque_seq.wrapping_add(1))
-            .collect();
-        for i in 2..seg.len() {
-            let (a, b) = (&seg[i - 1], &seg[i]);
-            if !keep(a) || !keep(b) {
+        // Index of the newest state so far with a flag, and with a late command.
+        let (mut last_flag, mut last_late) = (None, None);
+        for (i, b) in seg.iter().enumerate() {
+            if b.flags & ramp_flags != 0
+                || applied(b).is_some_and(|t| t.flags & torque_flags::SLEW_LIMITED != 0)
+            {
+                last_flag = Some(i);
+            }
+            if i > 0 && b.torque_seq != seg[i - 1].torque_seq.wrapping_add(1) {
+                last_late = Some(i);
+            }
+            // The first state of a process is published before any torque is applied.
+            if i < 2 || !keep(&seg[i - 1]) || !keep(b) {
                 continue;
             }
-            let window = i.saturating_sub(ramp_steps)..=i;
-            let after_flag = flagged[window.clone()].iter().any(|f| *f);
-            let after_late = late[window].iter().any(|f| *f);
+            let a = &seg[i - 1];
+            let recent = |last: Option<usize>| last.is_some_and(|k| i - k <= ramp_steps);
+            let (after_flag, after_late) = (recent(last_flag), recent(last_late));
             for (j, (lo, hi)) in bound.iter().zip(cap).enumerate() {
                 let d = (b.tau_applied[j] - a.tau_applied[j]).abs();
                 if d <= *lo {
                     continue;
                 }
                 out.beyond_bound += 1;
-                if d <= hi * (1.0 + 1e-9) && after_flag {
+                let within_cap = d <= hi * (1.0 + 1e-9);
+                if within_cap && after_flag {
                     out.after_flag += 1;
-                } else if d <= hi * (1.0 + 1e-9) && after_late {
+                } else if within_cap && after_late {
                     out.after_late_command += 1;
                 } else {
                     out.violations.push(format!(
