@@ -46,6 +46,7 @@ for f in ruckig-0.19.4/src/ruckig/*.cpp; do
 done
 rm -f build_ruckig/libruckig.a && ar rcs build_ruckig/libruckig.a build_ruckig/*.o
 g++ "${flags[@]}" -Iruckig-0.19.4/include "$here/bench_ruckig.cpp" build_ruckig/libruckig.a -o bench_ruckig
+g++ "${flags[@]}" -Iruckig-0.19.4/include "$here/ruckig_sample.cpp" build_ruckig/libruckig.a -o ruckig_sample
 # The compile definitions of Pinocchio's `pinocchio_headers` CMake target; no template
 # instantiation library, no URDF, no collision.
 inc=deps/cmeel.prefix/include

@@ -117,3 +117,52 @@ fn synchronised_six_joints_match_ruckig_durations() {
         }
     }
 }
+
+/// From states bound to cross vmax, Ruckig brakes back under vmax as fast as the jerk
+/// limit allows (ending early if the stop velocity reaches −vmax), then plans
+/// time-optimally: durations and samples, including those inside the brake.
+#[test]
+fn braking_from_a_state_bound_to_cross_vmax_matches_ruckig() {
+    let r = load("ruckig_brake_reference.json");
+    let cases = r["cases"].as_array().expect("cases");
+    assert!(cases.len() >= 50, "{} cases", cases.len());
+    for (n, c) in cases.iter().enumerate() {
+        let lim = limits(&[f(&c["vmax"])], &[f(&c["amax"])], &[f(&c["jmax"])], 1e3);
+        let req = soft_request(
+            &[f(&c["q0"])],
+            &[f(&c["v0"])],
+            &[f(&c["a0"])],
+            &[f(&c["q1"])],
+            lim,
+        );
+        let tr = Trajectory::plan(&req).unwrap_or_else(|e| panic!("case {n}: {e}"));
+        assert!(tr.braked(), "case {n} did not brake");
+        assert_close(
+            tr.duration(),
+            f(&c["duration_s"]),
+            1e-9,
+            &format!("case {n} duration"),
+        );
+        let t = fs(&c["t_s"]);
+        for (field, want) in [
+            ("q", fs(&c["q"])),
+            ("qd", fs(&c["qd"])),
+            ("qdd", fs(&c["qdd"])),
+        ] {
+            for k in 0..t.len() {
+                let x = tr.sample(t[k]);
+                let got = match field {
+                    "q" => x.q[0],
+                    "qd" => x.qd[0],
+                    _ => x.qdd[0],
+                };
+                assert!(
+                    (got - want[k]).abs() < 1e-9 * (1.0 + want[k].abs()),
+                    "case {n} {field} at {}: {got} vs Ruckig's {}",
+                    t[k],
+                    want[k]
+                );
+            }
+        }
+    }
+}
