@@ -24,39 +24,8 @@
 
 using namespace pinocchio;
 
-static inline double thread_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) * 1e9 + double(ts.tv_nsec);
-}
-#define BARRIER() asm volatile("" ::: "memory")
+#include "bench_timing.hpp"
 
-struct Stat { double mean_ns, best_ns; long calls; };
-
-// Warm up ~0.3 s, then time batches of 256 calls for `seconds` of thread CPU time.
-template <class F>
-static Stat run_bench(const char* name, F&& f, double seconds) {
-  constexpr int B = 256;
-  size_t k = 0;
-  double t0 = thread_ns();
-  while (thread_ns() - t0 < 0.3e9)
-    for (int i = 0; i < B; ++i) { f(k++); BARRIER(); }
-  double total = 0, best = 1e300;
-  long nb = 0;
-  while (total < seconds * 1e9) {
-    double a = thread_ns();
-    for (int i = 0; i < B; ++i) { f(k++); BARRIER(); }
-    double b = thread_ns();
-    total += b - a;
-    best = std::min(best, b - a);
-    ++nb;
-  }
-  Stat s{total / double(nb * B), best / B, nb * B};
-  std::printf("%-34s mean %9.2f ns   best-batch %9.2f ns   (%ld calls)\n", name, s.mean_ns, s.best_ns,
-              s.calls);
-  std::fflush(stdout);
-  return s;
-}
 
 struct JointIn { double theta, d, a, alpha, qmin, qmax, vmax, amax, jmax, m, com[3], I[9], rotor; };
 

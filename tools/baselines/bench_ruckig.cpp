@@ -19,33 +19,28 @@
 using namespace ruckig;
 using Vec6 = std::array<double, 6>;
 
-static inline double thread_ns() {
-  timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) * 1e9 + double(ts.tv_nsec);
-}
-#define BARRIER() asm volatile("" ::: "memory")
+#include "bench_timing.hpp"
 
-template <class F>
-static void run_bench(const char* name, F&& f, double seconds) {
-  constexpr int B = 256;
-  size_t k = 0;
-  double t0 = thread_ns();
-  while (thread_ns() - t0 < 0.3e9)
-    for (int i = 0; i < B; ++i) { f(k++); BARRIER(); }
-  double total = 0, best = 1e300;
-  long nb = 0;
-  while (total < seconds * 1e9) {
+// Per-problem thread CPU time of `calculate` (mean of REP back-to-back solves inside one
+// clock pair), Ruckig's errors, and the mean trajectory duration.
+template <class Problems>
+static Distribution time_problems(Ruckig<6>& otg, Trajectory<6>& traj, const Problems& ps, long& errors,
+                                  double& mean_duration) {
+  constexpr int REP = 8;
+  std::vector<double> per(ps.size());
+  errors = 0;
+  double dsum = 0;
+  for (size_t k = 0; k < ps.size(); ++k) {
+    Result res = Result::Working;
     double a = thread_ns();
-    for (int i = 0; i < B; ++i) { f(k++); BARRIER(); }
+    for (int r = 0; r < REP; ++r) { res = otg.calculate(ps[k], traj); BARRIER(); }
     double b = thread_ns();
-    total += b - a;
-    best = std::min(best, b - a);
-    ++nb;
+    per[k] = (b - a) / REP;
+    if (res != Result::Working) ++errors;
+    dsum += traj.get_duration();
   }
-  std::printf("%-40s mean %9.2f ns   best-batch %9.2f ns   (%ld calls)\n", name, total / double(nb * B), best / B,
-              nb * B);
-  std::fflush(stdout);
+  mean_duration = dsum / double(ps.size());
+  return Distribution(std::move(per));
 }
 
 int main(int argc, char** argv) {
@@ -187,31 +182,15 @@ int main(int argc, char** argv) {
     double b = thread_ns();
     ovh = std::min(ovh, b - a);
   }
-  constexpr int REP = 8;
-  std::vector<double> per(nprob);
   long errors = 0;
-  double dsum = 0;
-  for (int k = 0; k < nprob; ++k) {
-    Result res = Result::Working;
-    double a = thread_ns();
-    for (int r2 = 0; r2 < REP; ++r2) { res = otg.calculate(sp[k], traj); BARRIER(); }
-    double b = thread_ns();
-    per[k] = (b - a) / REP;
-    if (res != Result::Working) ++errors;
-    dsum += traj.get_duration();
-  }
-  std::vector<double> s = per;
-  std::sort(s.begin(), s.end());
-  auto pct = [&](double p) { return s[std::min<size_t>(s.size() - 1, size_t(std::ceil(p * s.size())) - 1)]; };
-  double mean = 0;
-  for (double x : s) mean += x;
-  mean /= s.size();
-  std::printf("3. state-to-state (target at rest), %d problems x %d repeats (per-problem mean of %d, one clock pair"
-              " per problem; clock-pair overhead %.0f ns /%d = %.1f ns, NOT subtracted):\n"
+  double mean_duration = 0;
+  const Distribution d3 = time_problems(otg, traj, sp, errors, mean_duration);
+  std::printf("3. state-to-state (target at rest), %d problems x 8 repeats (per-problem mean of 8, one clock pair"
+              " per problem; clock-pair overhead %.0f ns /8 = %.1f ns, NOT subtracted):\n"
               "   mean %.1f ns  p50 %.1f  p90 %.1f  p99 %.1f  p99.9 %.1f  max %.1f  min %.1f ns; errors %ld; rejected"
               " draws %ld; mean duration %.3f s\n",
-              nprob, REP, REP, ovh, REP, ovh / REP, mean, pct(0.5), pct(0.9), pct(0.99), pct(0.999), s.back(), s.front(),
-              errors, rejected, dsum / nprob);
+              nprob, ovh, ovh / 8, d3.mean, d3.pct(0.5), d3.pct(0.9), d3.pct(0.99), d3.pct(0.999), d3.sorted.back(),
+              d3.sorted.front(), errors, rejected, mean_duration);
 
   // ---------------- 3b. the SAME problems as microrobot's cpu_time / criterion (benches/common/mod.rs) ----------------
   {
@@ -236,24 +215,12 @@ int main(int argc, char** argv) {
       }
     }
     for (int k = 0; k < std::min(nprob, 2000); ++k) otg.calculate(mp[k], traj);
-    constexpr int REP = 8;
-    std::vector<double> per(nprob);
-    long errors = 0; double dsum = 0;
-    for (int k = 0; k < nprob; ++k) {
-      Result res = Result::Working;
-      double a = thread_ns();
-      for (int r2 = 0; r2 < REP; ++r2) { res = otg.calculate(mp[k], traj); BARRIER(); }
-      double b = thread_ns();
-      per[k] = (b - a) / REP;
-      if (res != Result::Working) ++errors;
-      dsum += traj.get_duration();
-    }
-    std::vector<double> s = per; std::sort(s.begin(), s.end());
-    auto pct = [&](double p) { return s[std::min<size_t>(s.size() - 1, size_t(std::ceil(p * s.size())) - 1)]; };
-    double mean = 0; for (double x : s) mean += x; mean /= s.size();
-    std::printf("3b. state-to-state, microrobot's problem set (LCG 30303, q in +-2.5 rad, Table 4 limits), %d problems x %d:\n"
-                "   mean %.1f ns  p50 %.1f  p90 %.1f  p99 %.1f  p99.9 %.1f  max %.1f ns; errors %ld; mean duration %.3f s\n",
-                nprob, REP, mean, pct(0.5), pct(0.9), pct(0.99), pct(0.999), s.back(), errors, dsum / nprob);
+    const Distribution d = time_problems(otg, traj, mp, errors, mean_duration);
+    std::printf("3b. state-to-state, microrobot's problem set (LCG 30303, q in +-2.5 rad, Table 4 limits), %d problems"
+                " x 8:\n   mean %.1f ns  p50 %.1f  p90 %.1f  p99 %.1f  p99.9 %.1f  max %.1f ns; errors %ld; mean"
+                " duration %.3f s\n",
+                nprob, d.mean, d.pct(0.5), d.pct(0.9), d.pct(0.99), d.pct(0.999), d.sorted.back(), errors,
+                mean_duration);
   }
   std::printf("(sink %g)\n", double(sink));
   return 0;
