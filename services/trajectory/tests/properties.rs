@@ -419,13 +419,14 @@ fn braked_motion_to_a_target_short_of_the_vmax_level_off_lands_on_it() {
     assert!(later.qd[0].abs() <= lim.velocity[0] * (1.0 + 1e-9));
 }
 
-/// A joint decelerating towards a target just past its brake point, asked for a
-/// duration just above its minimum (found by `soft_synchronised_duration_is_the_smallest_reachable`).
-/// The requested duration is blocked; until 2026-12-01 synchronisation raised it to the
-/// "stop, then move" floor, although the stretch family reaches a shorter one (the end
-/// of the blocked interval, where its cruise velocity is small).
+/// A joint decelerating towards a target just past its brake point, asked for
+/// durations just above its minimum (found by `soft_synchronised_duration_is_the_smallest_reachable`).
+/// The stretch family cannot take them (a blocked interval: until 2026-12-02 they were
+/// raised to its end); profiles whose acceleration does not return to zero between
+/// the halves (`soft::free`) can, and Ruckig 0.19.4 with `minimum_duration` finishes
+/// at exactly these durations (1 + 1e-6, 1.001, 1.01, 1.05 × its 4.19433754433952 s).
 #[test]
-fn blocked_duration_is_raised_to_the_end_of_the_blocked_interval_not_the_floor() {
+fn durations_the_stretch_family_cannot_take_are_reached_as_ruckig_reaches_them() {
     let lim1 = Limits1 {
         v: 1.607882619036064,
         a: 1.872704276179884,
@@ -435,28 +436,32 @@ fn blocked_duration_is_raised_to_the_end_of_the_blocked_interval_not_the_floor()
     let lim = limits(&[lim1.v], &[lim1.a], &[lim1.j], 1e3);
     let mut req = soft_request(&[0.0], &[v0], &[a0], &[d], lim);
     let t_opt = Trajectory::plan(&req).expect("plans").duration();
-    let t_req = t_opt * (1.0 + 1e-6);
-    req.profile = Profile::Soft {
-        min_duration: Some(t_req),
-    };
-    let t = Trajectory::plan(&req).expect("plans").duration();
-    let (runs, floor) = reachable_by_scan(v0, a0, d, &lim1);
-    assert!(
-        t > t_req * (1.0 + 1e-9),
-        "{t_req} s is blocked, yet planned {t}"
-    );
-    assert!(
-        t < floor * (1.0 - 1e-6),
-        "planned {t}, the floor is {floor}"
-    );
-    // The smallest duration ≥ t_req the scan finds lies within its grid's resolution.
-    let best = runs
-        .iter()
-        .filter(|r| r.1 >= t_req)
-        .map(|r| r.0.max(t_req))
-        .fold(floor, f64::min);
-    assert!(
-        t <= best * (1.0 + 1e-12) && t >= best * (1.0 - 1e-4),
-        "planned {t}, scan {best}"
-    );
+    assert!((t_opt - 4.19433754433952).abs() < 1e-9 * t_opt, "{t_opt}");
+    let (runs, _floor) = reachable_by_scan(v0, a0, d, &lim1);
+    for f in [1.0 + 1e-6, 1.001, 1.01, 1.05] {
+        let t_req = t_opt * f;
+        // The stretch family's scan has no member within 1e-6 of it.
+        assert!(
+            !runs
+                .iter()
+                .any(|r| r.0 <= t_req * (1.0 + 1e-6) && t_req <= r.1 * (1.0 + 1e-6)),
+            "{t_req} s is in the stretch family after all"
+        );
+        req.profile = Profile::Soft {
+            min_duration: Some(t_req),
+        };
+        let tr = Trajectory::plan(&req).expect("plans");
+        assert!(
+            (tr.duration() - t_req).abs() < 1e-12 * t_req,
+            "{} vs {t_req}",
+            tr.duration()
+        );
+        let end = tr.sample(tr.duration());
+        assert_eq!((end.q[0], end.qd[0], end.qdd[0]), (d, 0.0, 0.0));
+        let near = tr.sample(tr.duration() * (1.0 - 1e-12));
+        assert!((near.q[0] - d).abs() < 1e-9 && near.qd[0].abs() < 1e-9);
+        tr.check_limits(&lim, true).expect("within the limits");
+        check_walk(&tr, 1, &[[lim1.v, lim1.a, lim1.j]], true, 0.0)
+            .expect("continuous, within the limits");
+    }
 }

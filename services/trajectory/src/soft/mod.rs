@@ -13,12 +13,14 @@
 //!   crosses zero in the interior.
 //! * [`brake`]: when |v0 + a0|a0|/(2 jmax)| > vmax the velocity limit will be crossed
 //!   whatever the jerk, so a brake pre-phase (−jmax, then −amax) first brings the
-//!   motion back under vmax, as Ruckig does.
+//!   motion back under vmax, as Ruckig's velocity brake does.
 //! * [`stretch`]: the same motion finishing exactly at a longer duration T: ramp to a
 //!   lower peak velocity vp, cruise, ramp down; vp solves the distance equation.
-//!   `reach` gives the exact set of durations it (or "stop, then move") can take.
+//!   `reach` gives the exact set of durations it (or "stop, then move") can take;
+//!   `free` reaches most of the rest with profiles without a cruise (Ruckig's step 2).
 
 pub mod brake;
+pub(crate) mod free;
 pub mod from_state;
 mod reach;
 pub mod rest_to_rest;

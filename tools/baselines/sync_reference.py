@@ -1,0 +1,61 @@
+#!/usr/bin/env python3
+"""Writes tests/reference/ruckig_sync_reference.json: synchronised soft-motion problems
+(every joint from a moving state to rest, finishing together) with Ruckig 0.19.4's
+common duration (Synchronization::Time).
+
+The inputs were found on 2026-12-02 by comparing 40 000 random synchronised problems
+(2 and 6 joints; q in ±3 rad, vmax 0.5-3, amax 0.5-5, jmax 1-30, start states
+anywhere inside the limits) with Ruckig: the 41 where microrobot's stretch family
+could not take Ruckig's duration for one non-limiting joint (its target just past its
+brake point). "reached": the 39 that the fallback of profiles without a cruise
+(soft::free) now reaches; "slower": the 2 it does not. This script keeps the inputs and recomputes Ruckig's durations:
+
+    tools/baselines/run.sh 1      # builds target/baselines/ruckig_sample
+    python3 tools/baselines/sync_reference.py [inputs.json]
+
+inputs.json (optional): {"reached": [problem, ...], "slower": [...]}, each problem as
+for `microrobot eval trajectory` (q0, q1, v0, a0, vmax, amax, jmax: one value per joint).
+"""
+import json
+import os
+import subprocess
+import sys
+
+ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
+SAMPLER = os.path.join(ROOT, "target", "baselines", "ruckig_sample")
+OUT = os.path.join(ROOT, "tests", "reference", "ruckig_sync_reference.json")
+KEYS = ("q0", "q1", "v0", "a0", "vmax", "amax", "jmax")
+
+
+def ruckig_duration(p):
+    n = len(p["q0"])
+    line = f"{n} " + " ".join(repr(float(x)) for k in KEYS for x in p[k]) + " 2\n"
+    r = json.loads(subprocess.run([SAMPLER], input=line, capture_output=True, text=True, check=True).stdout)
+    if "error" in r:
+        raise SystemExit(f"ruckig refused {p}: {r['error']}")
+    return r["duration"]
+
+
+def main():
+    src = sys.argv[1] if len(sys.argv) > 1 else OUT
+    with open(src) as f:
+        inputs = json.load(f)
+    doc = {
+        "problem": "synchronised soft motion: every joint from (q0, v0, a0) to rest at q1, all finishing "
+                   "together at the smallest common duration (Ruckig Synchronization::Time); no position limits",
+        "units": "radians, seconds",
+        "generator": {"script": "tools/baselines/sync_reference.py",
+                      "sampler": "tools/baselines/ruckig_sample.cpp, g++ -O3 -march=native",
+                      "ruckig": "0.19.4"},
+        "notes": [__doc__.split("This script")[0].strip()],
+    }
+    for group in ("reached", "slower"):
+        doc[group] = [{**{k: p[k] for k in KEYS}, "duration_s": ruckig_duration(p)} for p in inputs[group]]
+    with open(OUT, "w") as f:
+        json.dump(doc, f, indent=1)
+        f.write("\n")
+    print(f"wrote {len(doc['reached'])} + {len(doc['slower'])} cases to {OUT}")
+
+
+if __name__ == "__main__":
+    main()
