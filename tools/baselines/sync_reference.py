@@ -3,17 +3,18 @@
 (every joint from a moving state to rest, finishing together) with Ruckig 0.19.4's
 common duration (Synchronization::Time).
 
-The inputs were found on 2026-12-02 by comparing 40 000 random synchronised problems
-(2 and 6 joints; q in ±3 rad, vmax 0.5-3, amax 0.5-5, jmax 1-30, start states
-anywhere inside the limits) with Ruckig: the 41 where microrobot's stretch family
-could not take Ruckig's duration for one non-limiting joint (its target just past its
-brake point). "reached": the 39 that the fallback of profiles without a cruise
-(soft::free) now reaches; "slower": the 2 it does not. This script keeps the inputs and recomputes Ruckig's durations:
+The inputs were found on 2026-12-02 by comparing random synchronised problems (2 and
+6 joints; q in ±3 rad, vmax 0.5-3, amax 0.5-5, jmax 1-30, start states anywhere inside
+the limits) with Ruckig: the 41 of 40 000 (seed 20240601) where microrobot's stretch
+family could not take Ruckig's duration for one non-limiting joint (its target just
+past its brake point), and the 6 of a fresh 40 000 (seed 777) that the fallback
+(soft::free) still missed before it had the shape with both amax holds.
+This script keeps the inputs and recomputes Ruckig's durations:
 
     tools/baselines/run.sh 1      # builds target/baselines/ruckig_sample
     python3 tools/baselines/sync_reference.py [inputs.json]
 
-inputs.json (optional): {"reached": [problem, ...], "slower": [...]}, each problem as
+inputs.json (optional): {"reached": [problem, ...]}, each problem as
 for `microrobot eval trajectory` (q0, q1, v0, a0, vmax, amax, jmax: one value per joint).
 """
 import json
@@ -49,12 +50,11 @@ def main():
                       "ruckig": "0.19.4"},
         "notes": [__doc__.split("This script")[0].strip()],
     }
-    for group in ("reached", "slower"):
-        doc[group] = [{**{k: p[k] for k in KEYS}, "duration_s": ruckig_duration(p)} for p in inputs[group]]
+    doc["reached"] = [{**{k: p[k] for k in KEYS}, "duration_s": ruckig_duration(p)} for p in inputs["reached"]]
     with open(OUT, "w") as f:
         json.dump(doc, f, indent=1)
         f.write("\n")
-    print(f"wrote {len(doc['reached'])} + {len(doc['slower'])} cases to {OUT}")
+    print(f"wrote {len(doc['reached'])} cases to {OUT}")
 
 
 if __name__ == "__main__":

@@ -168,51 +168,45 @@ fn braking_from_a_state_bound_to_cross_vmax_matches_ruckig() {
 }
 
 /// Synchronised problems where one non-limiting joint's target lies just past its brake
-/// point, found by comparing 40 000 random problems with Ruckig: Ruckig's common
-/// duration is reached ("reached"; the stretch family alone came out 0.2–20 % longer),
-/// and never undercut ("slower": the 2 still longer). Every joint ends exactly at rest
-/// on its target with |a| ≤ amax, and |v| ≤ vmax except for the unavoidable overshoot
-/// of a joint that has to brake.
+/// point, found by comparing 80 000 random problems with Ruckig (the stretch family
+/// alone came out 0.2–20 % longer on them): Ruckig's common duration is reached. Every
+/// joint ends exactly at rest on its target with |a| ≤ amax, and |v| ≤ vmax except for
+/// the unavoidable overshoot of a joint that has to brake.
 #[test]
 fn synchronised_durations_with_a_joint_just_past_its_brake_point_match_ruckig() {
     let r = load("ruckig_sync_reference.json");
-    for group in ["reached", "slower"] {
-        let cases = r[group].as_array().expect("group");
-        assert!(!cases.is_empty(), "{group}");
-        for (n, c) in cases.iter().enumerate() {
-            let (vm, am, jm) = (fs(&c["vmax"]), fs(&c["amax"]), fs(&c["jmax"]));
-            let (q0, v0, a0, q1) = (fs(&c["q0"]), fs(&c["v0"]), fs(&c["a0"]), fs(&c["q1"]));
-            let lim = limits(&vm, &am, &jm, 1e3);
-            let tr = Trajectory::plan(&soft_request(&q0, &v0, &a0, &q1, lim))
-                .unwrap_or_else(|e| panic!("{group} {n}: {e}"));
-            let want = f(&c["duration_s"]);
-            if group == "reached" {
-                assert_close(tr.duration(), want, 1e-9, &format!("{group} {n} duration"));
-            } else {
-                assert!(
-                    tr.duration() >= want * (1.0 - 1e-9),
-                    "{group} {n} undercuts Ruckig"
-                );
-            }
-            let end = tr.sample(tr.duration());
+    let cases = r["reached"].as_array().expect("reached");
+    assert!(cases.len() >= 40, "{} cases", cases.len());
+    for (n, c) in cases.iter().enumerate() {
+        let (vm, am, jm) = (fs(&c["vmax"]), fs(&c["amax"]), fs(&c["jmax"]));
+        let (q0, v0, a0, q1) = (fs(&c["q0"]), fs(&c["v0"]), fs(&c["a0"]), fs(&c["q1"]));
+        let lim = limits(&vm, &am, &jm, 1e3);
+        let tr = Trajectory::plan(&soft_request(&q0, &v0, &a0, &q1, lim))
+            .unwrap_or_else(|e| panic!("case {n}: {e}"));
+        assert_close(
+            tr.duration(),
+            f(&c["duration_s"]),
+            1e-9,
+            &format!("case {n} duration"),
+        );
+        let end = tr.sample(tr.duration());
+        for i in 0..q0.len() {
+            assert_close(end.q[i], q1[i], 1e-12, "end q");
+            assert_eq!((end.qd[i], end.qdd[i]), (0.0, 0.0), "case {n} joint {i}");
+        }
+        let steps = 4000;
+        for k in 0..=steps {
+            let x = tr.sample(tr.duration() * k as f64 / steps as f64);
             for i in 0..q0.len() {
-                assert_close(end.q[i], q1[i], 1e-12, "end q");
-                assert_eq!((end.qd[i], end.qdd[i]), (0.0, 0.0), "{group} {n} joint {i}");
-            }
-            let steps = 4000;
-            for k in 0..=steps {
-                let x = tr.sample(tr.duration() * k as f64 / steps as f64);
-                for i in 0..q0.len() {
-                    let v_bound = vm[i].max((v0[i] + a0[i] * a0[i].abs() / (2.0 * jm[i])).abs());
-                    assert!(
-                        x.qdd[i].abs() <= am[i] * (1.0 + 1e-9),
-                        "{group} {n} joint {i} a"
-                    );
-                    assert!(
-                        x.qd[i].abs() <= v_bound * (1.0 + 1e-9),
-                        "{group} {n} joint {i} v"
-                    );
-                }
+                let v_bound = vm[i].max((v0[i] + a0[i] * a0[i].abs() / (2.0 * jm[i])).abs());
+                assert!(
+                    x.qdd[i].abs() <= am[i] * (1.0 + 1e-9),
+                    "case {n} joint {i} a"
+                );
+                assert!(
+                    x.qd[i].abs() <= v_bound * (1.0 + 1e-9),
+                    "case {n} joint {i} v"
+                );
             }
         }
     }

@@ -1,7 +1,7 @@
 //! Fallback for a duration T that the stretch family cannot take (a blocked
 //! interval): Ruckig's step-2 profiles without a cruise — jerk phases of ±jmax,
-//! `(s1, −s1, s2, −s2)` (UDDU or UDUD), of free lengths, with at most one hold at
-//! ±amax inside the first half (ACC0) or the second (ACC1) — solved for T.
+//! `(s1, −s1, s2, −s2)` (UDDU or UDUD), of free lengths, with a hold at ±amax inside
+//! the first half (ACC0), the second (ACC1), both or neither — solved for T.
 //!
 //! The stretch family reaches a joint's durations through a velocity change to a
 //! level vp with a = 0 there. When a target lies just past the brake point, profiles
@@ -28,7 +28,7 @@ pub fn phases(v0: f64, a0: f64, d: f64, t: f64, lim: &Limits1) -> Option<Phases>
     if t.is_nan() || t <= 0.0 {
         return None;
     }
-    for shape in [Shape::None, Shape::Acc0, Shape::Acc1] {
+    for shape in [Shape::None, Shape::Acc0, Shape::Acc1, Shape::Acc0Acc1] {
         for (s1, s2) in [(1.0, -1.0), (-1.0, 1.0), (1.0, 1.0), (-1.0, -1.0)] {
             let p = Pattern {
                 v0,
@@ -57,6 +57,8 @@ enum Shape {
     Acc0,
     /// A hold at s2·amax before the last phase; unknowns t1, t3.
     Acc1,
+    /// Both holds; unknowns t2 (the first hold), t3.
+    Acc0Acc1,
 }
 
 /// One shape and jerk pattern: phases with jerks s1·J, 0, −s1·J, s2·J, 0, −s2·J.
@@ -76,13 +78,13 @@ impl Pattern {
     fn lengths(&self, x: f64, y: f64) -> Option<[f64; 6]> {
         let (j, am) = (self.lim.j, self.lim.a);
         let (t1, t2, t3) = match self.shape {
-            Shape::Acc0 => ((self.s1 * am - self.a0) / (self.s1 * j), x, y),
+            Shape::Acc0 | Shape::Acc0Acc1 => ((self.s1 * am - self.a0) / (self.s1 * j), x, y),
             Shape::None | Shape::Acc1 => (x, 0.0, y),
         };
         let a3 = self.a0 + self.s1 * j * (t1 - t3);
         let rest = self.t - t1 - t2 - t3;
         let (t5, t6, t7) = match self.shape {
-            Shape::Acc1 => {
+            Shape::Acc1 | Shape::Acc0Acc1 => {
                 let t5 = (self.s2 * am - a3) / (self.s2 * j);
                 let t7 = am / j;
                 (t5, rest - t5 - t7, t7)
