@@ -252,6 +252,7 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
         floor: None,
         t0: None,
         t0_ns: 0,
+        last_poll_ns: 0,
         kills: Vec::new(),
         rotation: 0,
         floor_epoch: Default::default(),
@@ -265,7 +266,13 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
     let started_utc = utc_now();
     let load_start = load_average();
     let (code, summary) = run::supervise_with(&run_args, &mut hooks)?;
-    let end_ns = monotonic_ns();
+    // The run under test ends at the last poll; what the stop itself flags (every
+    // service leaving Active) is not a fault's symptom. A restart quicker than the
+    // watchdogs flags nothing, and the stop's edges were then taken for its detection.
+    let end_ns = match hooks.last_poll_ns {
+        0 => monotonic_ns(),
+        t => t,
+    };
     drop(hooks.load.take());
     let observed = match hooks.observer.take() {
         Some(o) => o.finish().map_err(failed)?,
@@ -387,6 +394,9 @@ struct Soak {
     floor_epoch: std::sync::Arc<std::sync::atomic::AtomicU64>,
     t0: Option<Instant>,
     t0_ns: u64,
+    /// Monotonic time of the latest supervision poll: the pipeline's orderly stop
+    /// starts after the last one.
+    last_poll_ns: u64,
     kills: Vec<Kill>,
     rotation: usize,
     next_kill_s: f64,
@@ -431,6 +441,7 @@ impl Hooks for Soak {
     }
 
     fn poll(&mut self, ctl: &mut Control<'_>) {
+        self.last_poll_ns = monotonic_ns();
         let Some(t0) = self.t0 else {
             self.start_clock();
             return;

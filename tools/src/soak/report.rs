@@ -165,6 +165,7 @@ pub struct Facts {
     pub load_average_end: String,
     pub thresholds: BTreeMap<String, String>,
     pub t0_ns: u64,
+    /// End of the run under test (the last supervision poll, before the stop).
     pub end_ns: u64,
     pub kills: Vec<Kill>,
     pub floor: Option<Floor>,
@@ -780,6 +781,30 @@ mod tests {
         let (f, w) = analyse_faults(&kills, &edges[..5], 0, 10_000_000_000);
         assert!(!f[0].recovered);
         assert_eq!(w[0].1, 10_000_000_000);
+    }
+
+    /// A restart quicker than the watchdogs flags nothing: the fault counts as
+    /// recovered when all is well at the end of the run, and the stop's own edges
+    /// (after `end_ns`) are not taken for its detection.
+    #[test]
+    fn an_unflagged_restart_is_recovered_and_the_stop_is_not_its_symptom() {
+        let edges = vec![
+            e(10, EdgeKind::StateHealthy),
+            e(1040, EdgeKind::NewTorquePublisher),
+            // The orderly stop after the run: services leave Active.
+            e(3010, EdgeKind::StateUnhealthy),
+        ];
+        let kills = vec![Kill {
+            role: "dynamics".into(),
+            pid: 7,
+            stamp_ns: 1_000_000_000,
+        }];
+        let (f, _) = analyse_faults(&kills, &edges, 0, 3_000_000_000);
+        assert!(f[0].recovered, "{:?}", f[0]);
+        assert_eq!(f[0].detect_ms, None);
+        // Taking the stop into the run (the old end) reads it as an unrecovered fault.
+        let (f, _) = analyse_faults(&kills, &edges, 0, 3_020_000_000);
+        assert!(!f[0].recovered);
     }
 
     #[test]
