@@ -744,6 +744,14 @@ impl Report {
 mod tests {
     use super::*;
 
+    fn dynamics_killed_at_1s() -> Kill {
+        Kill {
+            role: "dynamics".into(),
+            pid: 7,
+            stamp_ns: 1_000_000_000,
+        }
+    }
+
     fn e(ms: u64, kind: EdgeKind) -> Edge {
         Edge {
             stamp_ns: ms * 1_000_000,
@@ -762,11 +770,7 @@ mod tests {
             e(1500, EdgeKind::StateHealthy),
             e(1501, EdgeKind::SetpointFree),
         ];
-        let kills = vec![Kill {
-            role: "dynamics".into(),
-            pid: 7,
-            stamp_ns: 1_000_000_000,
-        }];
+        let kills = vec![dynamics_killed_at_1s()];
         let (f, w) = analyse_faults(&kills, &edges, 0, 10_000_000_000);
         assert_eq!(f.len(), 1);
         assert!((f[0].detect_ms.unwrap() - 50.0).abs() < 1e-9);
@@ -794,11 +798,7 @@ mod tests {
             // The orderly stop after the run: services leave Active.
             e(3010, EdgeKind::StateUnhealthy),
         ];
-        let kills = vec![Kill {
-            role: "dynamics".into(),
-            pid: 7,
-            stamp_ns: 1_000_000_000,
-        }];
+        let kills = vec![dynamics_killed_at_1s()];
         let (f, _) = analyse_faults(&kills, &edges, 0, 3_000_000_000);
         assert!(f[0].recovered, "{:?}", f[0]);
         assert_eq!(f[0].detect_ms, None);

@@ -243,26 +243,22 @@ mod tests {
         ts[3] = 0.2;
         ts[2] = ts[3] + a3 / 5.0;
         assert!(ts[2] > 0.0);
-        let mut k = Kin {
-            p: 0.0,
-            v: v0,
-            a: a0,
+        let end_from = |v0: f64| {
+            let mut k = Kin {
+                p: 0.0,
+                v: v0,
+                a: a0,
+            };
+            for i in 0..4 {
+                k = k.advance(ts[i], js[i]);
+            }
+            k
         };
-        for i in 0..4 {
-            k = k.advance(ts[i], js[i]);
-        }
-        assert!(k.a.abs() < 1e-15);
-        // Its end velocity is not zero in general: ask for the position it reaches
-        // with a final velocity of zero by shifting v0 accordingly.
-        let v0 = v0 - k.v;
-        let mut k = Kin {
-            p: 0.0,
-            v: v0,
-            a: a0,
-        };
-        for i in 0..4 {
-            k = k.advance(ts[i], js[i]);
-        }
+        assert!(end_from(v0).a.abs() < 1e-15);
+        // Its end velocity is not zero in general: shift v0 so that it is (the end
+        // velocity moves one for one with v0), and ask for the position reached.
+        let v0 = v0 - end_from(v0).v;
+        let k = end_from(v0);
         let t: f64 = ts.iter().sum();
         let ph = phases(v0, a0, k.p, t, &lim).expect("found");
         let end = ph.integrate(Kin {
