@@ -10,7 +10,7 @@
 
 use crate::piecewise::{Kin, Phases, Piecewise};
 use crate::soft::stretch::Stretch;
-use crate::soft::{Limits1, brake::brake, free, from_state, rest_to_rest};
+use crate::soft::{Limits1, brake::brake, from_state, rest_to_rest};
 use crate::{JointState, KinematicLimits, MAX_JOINTS};
 
 #[derive(Clone, Copy, Default)]
@@ -192,18 +192,6 @@ pub(crate) fn plan_soft(
                     stretched[i] = true;
                 }
                 None => {
-                    // A blocked duration of the stretch family: try the profiles
-                    // without a level at a = 0 (Ruckig's step-2 shapes) first.
-                    let d = target_q[i] - w.after.p;
-                    if let Some(main) =
-                        free::phases(w.after.v, w.after.a, d, t_sync - w.t_brake, &lim)
-                    {
-                        let mut ph = brake(k0(i), &lim);
-                        ph.extend(&main);
-                        plans[i] = ph;
-                        stretched[i] = true;
-                        continue;
-                    }
                     blocked = true;
                     let next = w.t_brake + st.next_reachable(t_sync - w.t_brake);
                     let next = if next > t_sync {

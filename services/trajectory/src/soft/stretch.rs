@@ -7,10 +7,12 @@
 //! the optimal motion's acceleration crosses zero at its velocity peak, the family's
 //! fastest member *is* the time-optimal motion. "Stop, then a rest-to-rest move"
 //! covers every duration from [`Stretch::guaranteed`] on. Durations neither reaches
-//! (blocked intervals, exact: `super::reach`) are reported as `None`, and
+//! (blocked intervals, exact: `super::reach`) are tried with the profiles without a
+//! cruise of [`super::free`]; what those miss too is reported as `None`, and
 //! [`Stretch::next_reachable`] names the end of the blocked interval, where
 //! synchronisation moves on to, as Ruckig's time synchronisation does.
 
+use super::free;
 use super::from_state::brake_point;
 use super::reach::{Reach, zero_cruise};
 use super::velocity::{ramp, ramp_from_rest, velocity_change};
@@ -129,9 +131,10 @@ impl Stretch {
             + rest_to_rest::time_optimal_duration((self.d - self.pb).abs(), lim)
     }
 
-    /// The smallest duration ≥ `t` that [`Stretch::phases`] reaches: `t` itself
-    /// unless it lies in a blocked interval, else that interval's end (see
-    /// `super::reach`). Synchronisation raises T to it.
+    /// The smallest duration ≥ `t` that the stretch family reaches: `t` itself unless
+    /// it lies in a blocked interval, else that interval's end (see `super::reach`).
+    /// [`Stretch::phases`] may reach more (through [`free`]); synchronisation asks
+    /// this only where `phases` found nothing, and raises T to it.
     pub fn next_reachable(&self, t: f64) -> f64 {
         if self.rest {
             return t.max(self.t_r2r);
@@ -144,8 +147,9 @@ impl Stretch {
         Reach::new(self.v0, self.a0, self.d, &self.lim, self.guaranteed())
     }
 
-    /// Phases (original frame) finishing at exactly `t`, or `None` when this family
-    /// has no member of that duration (t below the minimum, or in a blocked interval).
+    /// Phases (original frame) finishing at exactly `t`, or `None` when no profile
+    /// does (t below the minimum, or in a blocked interval that [`free`] — profiles
+    /// without a cruise — cannot take either).
     ///
     /// Search: f(vp) = D1 + D2 + vp·Tc − d on peak velocities where the cruise Tc ≥ 0,
     /// from the upper anchor down between the stop velocity and the anchor (where Tc
@@ -159,7 +163,8 @@ impl Stretch {
             rest_to_rest::stretched(self.d, t, lim)
         } else {
             self.search(t, lim)
-                .or_else(|| self.stop_then_move(t, lim))?
+                .or_else(|| self.stop_then_move(t, lim))
+                .or_else(|| free::phases(self.v0, self.a0, self.d, t, lim))?
         };
         for p in &mut ph.p[..ph.n] {
             p.j *= self.sg;
