@@ -19,42 +19,22 @@ for `microrobot eval trajectory` (q0, q1, v0, a0, vmax, amax, jmax: one value pe
 """
 import json
 import os
-import subprocess
 import sys
 
-ROOT = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
-SAMPLER = os.path.join(ROOT, "target", "baselines", "ruckig_sample")
+from ruckig_reference import KEYS, ROOT, solve, write
+
 OUT = os.path.join(ROOT, "tests", "reference", "ruckig_sync_reference.json")
-KEYS = ("q0", "q1", "v0", "a0", "vmax", "amax", "jmax")
-
-
-def ruckig_duration(p):
-    n = len(p["q0"])
-    line = f"{n} " + " ".join(repr(float(x)) for k in KEYS for x in p[k]) + " 2\n"
-    r = json.loads(subprocess.run([SAMPLER], input=line, capture_output=True, text=True, check=True).stdout)
-    if "error" in r:
-        raise SystemExit(f"ruckig refused {p}: {r['error']}")
-    return r["duration"]
 
 
 def main():
-    src = sys.argv[1] if len(sys.argv) > 1 else OUT
-    with open(src) as f:
-        inputs = json.load(f)
-    doc = {
-        "problem": "synchronised soft motion: every joint from (q0, v0, a0) to rest at q1, all finishing "
-                   "together at the smallest common duration (Ruckig Synchronization::Time); no position limits",
-        "units": "radians, seconds",
-        "generator": {"script": "tools/baselines/sync_reference.py",
-                      "sampler": "tools/baselines/ruckig_sample.cpp, g++ -O3 -march=native",
-                      "ruckig": "0.19.4"},
-        "notes": [__doc__.split("This script")[0].strip()],
-    }
-    doc["reached"] = [{**{k: p[k] for k in KEYS}, "duration_s": ruckig_duration(p)} for p in inputs["reached"]]
-    with open(OUT, "w") as f:
-        json.dump(doc, f, indent=1)
-        f.write("\n")
-    print(f"wrote {len(doc['reached'])} cases to {OUT}")
+    with open(sys.argv[1] if len(sys.argv) > 1 else OUT) as f:
+        problems = json.load(f)["reached"]
+    reached = [{**{k: p[k] for k in KEYS}, "duration_s": r["duration"]}
+               for p, r in zip(problems, solve(problems, 2))]
+    write("ruckig_sync_reference.json", "sync_reference.py",
+          "synchronised soft motion: every joint from (q0, v0, a0) to rest at q1, all finishing "
+          "together at the smallest common duration (Ruckig Synchronization::Time); no position limits",
+          [__doc__.split("This script")[0].strip()], reached=reached)
 
 
 if __name__ == "__main__":
