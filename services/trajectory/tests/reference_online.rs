@@ -6,59 +6,78 @@
 
 mod common;
 use common::*;
-use microrobot_trajectory::Trajectory;
+use microrobot_trajectory::{KinematicLimits, Trajectory};
+
+/// The keys one reference file names a single-joint case's fields with.
+struct SingleKeys {
+    q0: &'static str,
+    q1: &'static str,
+    q: &'static str,
+    qd: &'static str,
+    qdd: &'static str,
+}
+
+/// Plans one joint of case `c` (limits `vmax`, `amax`, `jmax`, start `v0`, `a0`) and
+/// holds its duration and its samples at `t_s` to Ruckig's to 1e-9.
+fn plan_and_match_ruckig(
+    c: &serde_json::Value,
+    k: &SingleKeys,
+    what: &str,
+) -> (Trajectory, KinematicLimits) {
+    let lim = limits(&[f(&c["vmax"])], &[f(&c["amax"])], &[f(&c["jmax"])], 1e3);
+    let req = soft_request(
+        &[f(&c[k.q0])],
+        &[f(&c["v0"])],
+        &[f(&c["a0"])],
+        &[f(&c[k.q1])],
+        lim,
+    );
+    let tr = Trajectory::plan(&req).unwrap_or_else(|e| panic!("{what}: {e}"));
+    assert_close(
+        tr.duration(),
+        f(&c["duration_s"]),
+        1e-9,
+        &format!("{what} duration"),
+    );
+    let t = fs(&c["t_s"]);
+    for (field, want) in [
+        (k.q, fs(&c[k.q])),
+        (k.qd, fs(&c[k.qd])),
+        (k.qdd, fs(&c[k.qdd])),
+    ] {
+        for (i, &ti) in t.iter().enumerate() {
+            let x = tr.sample(ti);
+            let got = if field == k.q {
+                x.q[0]
+            } else if field == k.qd {
+                x.qd[0]
+            } else {
+                x.qdd[0]
+            };
+            assert!(
+                (got - want[i]).abs() < 1e-9 * (1.0 + want[i].abs()),
+                "{what} {field} at {ti}: {got} vs Ruckig's {}",
+                want[i]
+            );
+        }
+    }
+    (tr, lim)
+}
 
 #[test]
 fn single_joint_from_moving_state_matches_ruckig() {
     let r = load("online_trajectory_reference.json");
+    let keys = SingleKeys {
+        q0: "p0",
+        q1: "p1",
+        q: "position",
+        qd: "velocity",
+        qdd: "acceleration",
+    };
     for (n, c) in r["single"].as_array().expect("single").iter().enumerate() {
-        let lim = limits(&[f(&c["vmax"])], &[f(&c["amax"])], &[f(&c["jmax"])], 1e3);
-        let req = soft_request(
-            &[f(&c["p0"])],
-            &[f(&c["v0"])],
-            &[f(&c["a0"])],
-            &[f(&c["p1"])],
-            lim,
-        );
-        let tr = Trajectory::plan(&req).unwrap_or_else(|e| panic!("case {n}: {e}"));
         let kind = c["kind"].as_str().expect("kind");
+        let (tr, lim) = plan_and_match_ruckig(c, &keys, &format!("case {n} ({kind})"));
         assert!(!tr.braked(), "case {n} ({kind}) braked");
-        assert_close(
-            tr.duration(),
-            f(&c["duration_s"]),
-            1e-9,
-            &format!("case {n} ({kind}) duration"),
-        );
-        let (t, q, v, a) = (
-            fs(&c["t_s"]),
-            fs(&c["position"]),
-            fs(&c["velocity"]),
-            fs(&c["acceleration"]),
-        );
-        for k in 0..t.len() {
-            let x = tr.sample(t[k]);
-            assert!(
-                (x.q[0] - q[k]).abs() < 1e-9 * (1.0 + q[k].abs()),
-                "case {n} ({kind}) q at {}: {} vs {}",
-                t[k],
-                x.q[0],
-                q[k]
-            );
-            assert!(
-                (x.qd[0] - v[k]).abs() < 1e-9 * (1.0 + v[k].abs()),
-                "case {n} ({kind}) qd at {}: {} vs {}",
-                t[k],
-                x.qd[0],
-                v[k]
-            );
-            assert!(
-                (x.qdd[0] - a[k]).abs() < 1e-9 * (1.0 + a[k].abs()),
-                "case {n} ({kind}) qdd at {}: {} vs {}",
-                t[k],
-                x.qdd[0],
-                a[k]
-            );
-        }
         tr.check_limits(&lim, true)
             .unwrap_or_else(|e| panic!("case {n}: {e}"));
     }
@@ -126,44 +145,16 @@ fn braking_from_a_state_bound_to_cross_vmax_matches_ruckig() {
     let r = load("ruckig_brake_reference.json");
     let cases = r["cases"].as_array().expect("cases");
     assert!(cases.len() >= 50, "{} cases", cases.len());
+    let keys = SingleKeys {
+        q0: "q0",
+        q1: "q1",
+        q: "q",
+        qd: "qd",
+        qdd: "qdd",
+    };
     for (n, c) in cases.iter().enumerate() {
-        let lim = limits(&[f(&c["vmax"])], &[f(&c["amax"])], &[f(&c["jmax"])], 1e3);
-        let req = soft_request(
-            &[f(&c["q0"])],
-            &[f(&c["v0"])],
-            &[f(&c["a0"])],
-            &[f(&c["q1"])],
-            lim,
-        );
-        let tr = Trajectory::plan(&req).unwrap_or_else(|e| panic!("case {n}: {e}"));
+        let (tr, _) = plan_and_match_ruckig(c, &keys, &format!("case {n}"));
         assert!(tr.braked(), "case {n} did not brake");
-        assert_close(
-            tr.duration(),
-            f(&c["duration_s"]),
-            1e-9,
-            &format!("case {n} duration"),
-        );
-        let t = fs(&c["t_s"]);
-        for (field, want) in [
-            ("q", fs(&c["q"])),
-            ("qd", fs(&c["qd"])),
-            ("qdd", fs(&c["qdd"])),
-        ] {
-            for k in 0..t.len() {
-                let x = tr.sample(t[k]);
-                let got = match field {
-                    "q" => x.q[0],
-                    "qd" => x.qd[0],
-                    _ => x.qdd[0],
-                };
-                assert!(
-                    (got - want[k]).abs() < 1e-9 * (1.0 + want[k].abs()),
-                    "case {n} {field} at {}: {got} vs Ruckig's {}",
-                    t[k],
-                    want[k]
-                );
-            }
-        }
     }
 }
 

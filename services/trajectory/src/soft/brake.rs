@@ -4,12 +4,12 @@
 //! Ruckig's velocity brake (`BrakeProfile::velocity_brake`), mirrored for the
 //! negative side: jerk −jmax until the velocity is back at vmax, holding −amax if it
 //! is reached first, and ending early if the stop velocity v − a²/(2 jmax) reaches
-//! −vmax (braking on would overshoot the limit on the other side). While a > 0 the velocity still grows by a²/(2 jmax) —
-//! unavoidable with bounded jerk — and from then on |v| only decreases. The brake ends
-//! the moment |v| = vmax (with a < 0, so the stop velocity is strictly inside): the
-//! time spent over vmax is the least the jerk limit allows. (Braking only until the
-//! stop velocity equals vmax instead would glide down onto vmax, faster overall but
-//! over the limit for longer — up to a third of a second in random problems.)
+//! −vmax (braking on would overshoot the limit on the other side). While a > 0 the
+//! velocity still grows by a²/(2 jmax) — unavoidable with bounded jerk — and from
+//! then on |v| only decreases; the time spent over vmax is the least the jerk limit
+//! allows. (Braking only until the stop velocity equals vmax instead would glide
+//! down onto vmax, faster overall but over the limit for longer — up to a third of a
+//! second in random problems.)
 
 use super::{Kin, Limits1, Phases, stop_velocity};
 

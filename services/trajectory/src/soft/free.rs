@@ -11,13 +11,13 @@
 //!
 //! Two unknown phase lengths per shape (the others follow from a = 0 at the end, the
 //! total T and, for a hold, reaching ±amax); the end velocity and position give two
-//! equations, solved by a grid over the (t1, t3)
-//! triangle and Newton's method from the best cells. Runs only for blocked durations,
-//! never on the common path; allocates nothing.
+//! equations, solved by a grid over the triangle of the two unknowns and Newton's
+//! method from the best cells. Runs only for blocked durations (from
+//! `Stretch::phases`), never on the common path; allocates nothing.
 
 use super::{Kin, Limits1, Phases};
 
-/// Grid cells per axis of the (t1, t3) triangle.
+/// Grid cells per axis of the unknowns' triangle.
 const GRID: usize = 24;
 /// Starting cells kept per jerk pattern for Newton's method.
 const STARTS: usize = 4;
