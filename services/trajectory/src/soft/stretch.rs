@@ -8,7 +8,7 @@
 //! fastest member *is* the time-optimal motion. "Stop, then a rest-to-rest move"
 //! covers every duration from [`Stretch::guaranteed`] on. Durations neither reaches
 //! (blocked intervals, exact: `super::reach`) are tried with the profiles without a
-//! cruise of [`super::free`]; what those miss too is reported as `None`, and
+//! cruise of `super::free`; what those miss too is reported as `None`, and
 //! [`Stretch::next_reachable`] names the end of the blocked interval, where
 //! synchronisation moves on to, as Ruckig's time synchronisation does.
 
@@ -133,7 +133,7 @@ impl Stretch {
 
     /// The smallest duration ≥ `t` that the stretch family reaches: `t` itself unless
     /// it lies in a blocked interval, else that interval's end (see `super::reach`).
-    /// [`Stretch::phases`] may reach more (through [`free`]); synchronisation asks
+    /// [`Stretch::phases`] may reach more (through `free`); synchronisation asks
     /// this only where `phases` found nothing, and raises T to it.
     pub fn next_reachable(&self, t: f64) -> f64 {
         if self.rest {
@@ -148,7 +148,7 @@ impl Stretch {
     }
 
     /// Phases (original frame) finishing at exactly `t`, or `None` when no profile
-    /// does (t below the minimum, or in a blocked interval that [`free`] — profiles
+    /// does (t below the minimum, or in a blocked interval that `free` — profiles
     /// without a cruise — cannot take either).
     ///
     /// Search: f(vp) = D1 + D2 + vp·Tc − d on peak velocities where the cruise Tc ≥ 0,
