@@ -4,6 +4,7 @@
 mod common;
 
 use common::*;
+use microrobot_runtime::exit_code;
 
 #[test]
 fn bad_config_value_is_refused_with_bad_config_exit_and_names_the_key() {
@@ -13,7 +14,7 @@ fn bad_config_value_is_refused_with_bad_config_exit_and_names_the_key() {
     let out = run(&["run", "--config", cfg.to_str().expect("utf-8")], 30.0);
     assert_eq!(
         out.code(),
-        Some(2),
+        Some(exit_code::BAD_CONFIG as i32),
         "exit code BAD_CONFIG; stderr:\n{}",
         out.stderr
     );
@@ -35,7 +36,12 @@ fn unknown_config_key_is_refused_with_bad_config_exit() {
     let inst = instance("unknownkey");
     let cfg = write_config(dir.path(), &inst, "", "[watchdog]\nstale_msec = 10.0");
     let out = run(&["run", "--config", cfg.to_str().expect("utf-8")], 30.0);
-    assert_eq!(out.code(), Some(2), "stderr:\n{}", out.stderr);
+    assert_eq!(
+        out.code(),
+        Some(exit_code::BAD_CONFIG as i32),
+        "stderr:\n{}",
+        out.stderr
+    );
     assert!(out.stderr.contains("watchdog.stale_msec"), "{}", out.stderr);
 }
 
@@ -54,7 +60,12 @@ fn bad_command_line_override_is_refused_like_a_config_key() {
         ],
         30.0,
     );
-    assert_eq!(out.code(), Some(2), "stderr:\n{}", out.stderr);
+    assert_eq!(
+        out.code(),
+        Some(exit_code::BAD_CONFIG as i32),
+        "stderr:\n{}",
+        out.stderr
+    );
     assert!(out.stderr.contains("rate_hz"), "{}", out.stderr);
 }
 

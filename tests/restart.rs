@@ -72,7 +72,18 @@ fn find_dynamics(instance: &str) -> Option<i32> {
 #[test]
 fn a_killed_service_is_restarted_under_the_restart_policy() {
     let (out, s, pids) = kill_dynamics_mid_run("restart", "restart");
-    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    // The pipeline ran on, but a service died: the run's verdict says so.
+    assert_eq!(
+        out.code(),
+        Some(3),
+        "SERVICE_FAILED; stderr:\n{}",
+        out.stderr
+    );
+    assert_eq!(s["exit_ok"], false, "{s}");
+    assert!(
+        s["failures"].to_string().contains("dynamics service died"),
+        "{s}"
+    );
     assert_eq!(s["services"]["dynamics"]["restarts"], 1, "{s}");
     assert_eq!(s["services"]["dynamics"]["exit"], "exit code 0", "{s}");
     assert_eq!(

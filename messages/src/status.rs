@@ -154,6 +154,103 @@ impl RefusalReason {
     }
 }
 
+/// Where the planner's motion program stands (`ServiceStatus::program_state`), so a
+/// supervisor can tell a program that ran to its end from one that was abandoned or never
+/// ran: both end with the arm held at rest.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum ProgramState {
+    /// No program configured (or the status is not the planner's).
+    None = 0,
+    /// Configured; waiting for the first measured state to plan it from.
+    Pending = 1,
+    /// Executing.
+    Running = 2,
+    /// Ran to its end.
+    Finished = 3,
+    /// Stopped before its end; `ServiceStatus::program_end` says why.
+    Abandoned = 4,
+    /// Never started; `ServiceStatus::program_end` says why.
+    NotRun = 5,
+}
+
+impl ProgramState {
+    /// Decodes the wire value, `None` (the Option) for an unknown value.
+    pub fn from_wire(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::None,
+            1 => Self::Pending,
+            2 => Self::Running,
+            3 => Self::Finished,
+            4 => Self::Abandoned,
+            5 => Self::NotRun,
+            _ => return Option::None,
+        })
+    }
+
+    /// Lower-case name, as in summaries.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Pending => "pending",
+            Self::Running => "running",
+            Self::Finished => "finished",
+            Self::Abandoned => "abandoned",
+            Self::NotRun => "not_run",
+        }
+    }
+}
+
+/// Why a program was abandoned or never run (`ServiceStatus::program_end`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum ProgramEnd {
+    /// Not ended early.
+    None = 0,
+    /// It cannot be planned from the measured start within the limits (a target outside
+    /// a joint's range, an unreachable pose, an impossible duration).
+    CannotPlan = 1,
+    /// The measured state went stale while it ran; the planner stopped the arm.
+    StaleState = 2,
+    /// The actuator latched its safe state.
+    SafeState = 3,
+    /// A run-time command (move, stop, e-stop) replaced it.
+    Command = 4,
+    /// The arm was moving when the planner started; it was brought to rest instead.
+    MovingAtStart = 5,
+    /// `teleop.enabled`: the planner started in teleop mode instead.
+    TeleopAtStart = 6,
+}
+
+impl ProgramEnd {
+    /// Decodes the wire value, `None` (the Option) for an unknown value.
+    pub fn from_wire(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::None,
+            1 => Self::CannotPlan,
+            2 => Self::StaleState,
+            3 => Self::SafeState,
+            4 => Self::Command,
+            5 => Self::MovingAtStart,
+            6 => Self::TeleopAtStart,
+            _ => return Option::None,
+        })
+    }
+
+    /// Why, in words.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::None => "not ended early",
+            Self::CannotPlan => "it cannot be planned from the measured start within the limits",
+            Self::StaleState => "the measured state went stale; the planner stopped the arm",
+            Self::SafeState => "the actuator latched its safe state",
+            Self::Command => "a run-time command (move, stop or e-stop) replaced it",
+            Self::MovingAtStart => "the arm was moving at start; it was brought to rest instead",
+            Self::TeleopAtStart => "teleop.enabled: the planner started in teleop mode instead",
+        }
+    }
+}
+
 /// Percentiles of a latency histogram, in ns (0 when no sample yet).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
@@ -205,7 +302,8 @@ pub struct ServiceStatus {
     pub commands_refused: u64,
     /// Planner: program (or motion) time in s; others: logical time of the last input.
     pub motion_time_s: f64,
-    /// 1 when the planner has finished its program and holds (planner only).
+    /// 1 when the planner's program is over (finished, abandoned or not run) and the arm
+    /// holds at rest (planner only); [`ServiceStatus::program_state`] says which.
     pub program_done: u32,
     /// Process CPU time (user + system) in ms.
     pub cpu_time_ms: u32,
@@ -231,4 +329,8 @@ pub struct ServiceStatus {
     /// Why the last refused bus message (setpoint, torque or state) was refused (a
     /// [`RefusalReason`]).
     pub last_input_refusal: u32,
+    /// Planner: a [`ProgramState`] value (0 elsewhere).
+    pub program_state: u32,
+    /// Planner: a [`ProgramEnd`] value, why the program was abandoned or not run.
+    pub program_end: u32,
 }

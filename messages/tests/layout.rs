@@ -39,7 +39,9 @@ fn status_layout_is_stable() {
     assert_eq!(offset_of!(ServiceStatus, estop_latency_max_ns), 328);
     assert_eq!(offset_of!(ServiceStatus, last_command_refusal), 336);
     assert_eq!(offset_of!(ServiceStatus, last_input_refusal), 340);
-    assert_eq!(size_of::<ServiceStatus>(), 344);
+    assert_eq!(offset_of!(ServiceStatus, program_state), 344);
+    assert_eq!(offset_of!(ServiceStatus, program_end), 348);
+    assert_eq!(size_of::<ServiceStatus>(), 352);
     assert_eq!(align_of::<ServiceStatus>(), 8);
 }
 
@@ -72,6 +74,17 @@ fn wire_enums_round_trip_and_refuse_unknown_values() {
         assert!(!r.describe().is_empty());
     }
     assert_eq!(RefusalReason::from_wire(20), None);
+    for v in 0..=5 {
+        let p = ProgramState::from_wire(v).expect("known program state");
+        assert_eq!(p as u32, v);
+    }
+    assert_eq!(ProgramState::from_wire(6), None);
+    for v in 0..=6 {
+        let e = ProgramEnd::from_wire(v).expect("known program end");
+        assert_eq!(e as u32, v);
+        assert!(!e.describe().is_empty());
+    }
+    assert_eq!(ProgramEnd::from_wire(7), None);
 }
 
 #[test]

@@ -1,5 +1,7 @@
 //! The `microrobot` CLI's subcommands, as a library so system tests and tools share them.
 
+pub mod check;
+pub mod config_path;
 pub mod eval_model;
 pub mod eval_trajectory;
 pub mod probe_chain;

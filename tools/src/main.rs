@@ -10,8 +10,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, replay};
 use microrobot_cli::{
-    eval_model, eval_trajectory, probe_chain, run, send, service, soak, study, teleop_report,
-    teleop_source, top,
+    check, eval_model, eval_trajectory, probe_chain, run, send, service, soak, study,
+    teleop_report, teleop_source, top,
 };
 
 #[derive(Parser)]
@@ -29,6 +29,9 @@ struct Cli {
 enum Command {
     /// Start the planner, dynamics and actuator processes headless and supervise them.
     Run(run::RunArgs),
+    /// Check the pipeline config, robot and program together before anything moves, and
+    /// print the resolved settings.
+    Check(check::CheckArgs),
     /// Run the pipeline for minutes to hours with injected faults and write a soak report.
     Soak(soak::SoakArgs),
     /// Measure the machine's floor for the pipeline's latency and CPU: three bare processes
@@ -79,6 +82,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(args) => return run::main(args),
+        Command::Check(args) => return check::main(args),
         Command::Soak(args) => return soak::main(args),
         Command::ProbeChain(args) => probe_chain::main(args),
         Command::Send(args) => send::main(args),

@@ -36,7 +36,7 @@ use crate::supervisor::summary::Percentiles;
 #[derive(Debug, Clone, clap::Args)]
 pub struct ProbeChainArgs {
     /// Pipeline config whose real-time settings and rate the chain uses.
-    #[arg(long, default_value = "config/pipeline.toml")]
+    #[arg(long, default_value_os_t = crate::config_path::default_config())]
     pub config: PathBuf,
     /// Tick rate in Hz (overrides `rate_hz`).
     #[arg(long)]

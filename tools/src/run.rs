@@ -17,7 +17,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use microrobot_messages::{LifecycleState, ServiceRole, ServiceStatus, monotonic_ns};
+use microrobot_messages::{
+    LifecycleState, ProgramEnd, ProgramState, ServiceRole, ServiceStatus, monotonic_ns,
+};
 use microrobot_model::Robot;
 use microrobot_runtime::config::FailurePolicy;
 use microrobot_runtime::{PipelineConfig, exit_code};
@@ -26,13 +28,14 @@ use crate::supervisor::instance::{self, InstanceInUse};
 use crate::supervisor::monitor::{ROLES, StatusMonitor, slot};
 use crate::supervisor::process::{Launch, Service, describe, log_tail};
 use crate::supervisor::state_tap::StateTap;
-use crate::supervisor::summary::{RunFacts, Summary, fold, lifecycle_name};
+use crate::supervisor::summary::{ProgramSummary, RunFacts, Summary, fold, lifecycle_name};
 
 /// Options of `microrobot run`; each override replaces the config file's key.
 #[derive(Debug, Clone, clap::Args)]
 pub struct RunArgs {
-    /// Pipeline config (every key documented in config/pipeline.README.md).
-    #[arg(long, default_value = "config/pipeline.toml")]
+    /// Pipeline config, every key documented in config/pipeline.README.md (default:
+    /// ./config/pipeline.toml, else the config shipped with the sources).
+    #[arg(long, default_value_os_t = crate::config_path::default_config())]
     pub config: PathBuf,
     /// Stop after this many seconds (overrides `duration_s`).
     #[arg(long, value_name = "S")]
@@ -73,6 +76,27 @@ pub struct RunArgs {
     /// it in the summary (`floor`). It shares the services' CPU, so it costs them a little.
     #[arg(long)]
     pub floor_probe: bool,
+}
+
+impl RunArgs {
+    /// The arguments of a plain `microrobot run --config <config>`.
+    pub fn for_config(config: PathBuf) -> Self {
+        Self {
+            config,
+            duration: None,
+            rate_hz: None,
+            lockstep: false,
+            program: None,
+            no_program: false,
+            instance: None,
+            summary_json: None,
+            no_feedback: false,
+            mass_scale: None,
+            quiet: false,
+            record: None,
+            floor_probe: false,
+        }
+    }
 }
 
 /// Runs the pipeline; the exit code is one of [`exit_code`].
@@ -134,6 +158,12 @@ pub trait Hooks {
     /// Appended to the progress line.
     fn progress(&self) -> String {
         String::new()
+    }
+    /// Whether this command injects faults on purpose and judges them by its own
+    /// verdict (the soak): then a service that died and was restarted, or a safe state
+    /// latched at the end, does not fail the run's own verdict.
+    fn judges_faults(&self) -> bool {
+        false
     }
 }
 
@@ -549,6 +579,18 @@ fn progress_line(monitor: &StatusMonitor, start: Instant) -> String {
     s
 }
 
+/// Whether the run's program is over: finished or abandoned with the arm at rest
+/// (`program_done`), or abandoned or not run while the actuator holds the arm in its
+/// latched safe state (the planner then follows the arm and `program_done` never comes).
+fn program_over(planner: &ServiceStatus, actuator: Option<&ServiceStatus>) -> bool {
+    let ended = matches!(
+        ProgramState::from_wire(planner.program_state),
+        Some(ProgramState::Abandoned | ProgramState::NotRun)
+    );
+    planner.program_done == 1
+        || (ended && actuator.is_some_and(|a| a.lifecycle == LifecycleState::Fault as u32))
+}
+
 fn is_ready(monitor: &StatusMonitor, role: ServiceRole) -> bool {
     monitor.get(role).is_some_and(|s| s.ready == 1)
 }
@@ -574,6 +616,20 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
         .map_err(fail(exit_code::BAD_CONFIG))?;
     let dof = robot.dof();
     let instance_name = cfg.instance.clone();
+    // Everything `microrobot check` checks, before anything starts.
+    let findings = crate::check::check_pipeline(&cfg);
+    for w in &findings.warnings {
+        eprintln!("warning: {w}");
+    }
+    if !findings.errors.is_empty() {
+        return Err(Failure {
+            code: exit_code::BAD_CONFIG,
+            error: anyhow::anyhow!(
+                "refused before start (`microrobot check` shows the same):\n  {}",
+                findings.errors.join("\n  ")
+            ),
+        });
+    }
 
     // One pipeline per instance: the lock refuses a second supervisor, the node scan a
     // pipeline whose supervisor is gone but whose services still run.
@@ -649,6 +705,10 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     };
 
     let mut outcome: Option<(Stop, u8, String)> = None;
+    // What the verdict needs beyond the stop: every death (restarted or not) and when the
+    // actuator's safe state latched (cleared again by a reset).
+    let mut deaths: Vec<String> = Vec::new();
+    let mut latched_at: Option<f64> = None;
 
     // Start in order, each after the previous one is ready.
     for role in ROLES {
@@ -727,6 +787,15 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     while outcome.is_none() {
         let _ = monitor.poll();
         state_tap.poll();
+        if let Some(a) = monitor.get(ServiceRole::Actuator) {
+            match LifecycleState::from_wire(a.lifecycle) {
+                Some(LifecycleState::Fault) => {
+                    latched_at.get_or_insert(run_start.elapsed().as_secs_f64());
+                }
+                Some(LifecycleState::Active | LifecycleState::Inactive) => latched_at = None,
+                _ => {}
+            }
+        }
         progress.update(&monitor, started, &hooks.progress());
         hooks.poll(&mut Control {
             pipe: &mut pipe,
@@ -746,7 +815,7 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
         if program_given
             && monitor
                 .get(ServiceRole::Planner)
-                .is_some_and(|p| p.program_done == 1)
+                .is_some_and(|p| program_over(p, monitor.get(ServiceRole::Actuator)))
         {
             outcome = Some((Stop::ProgramDone, exit_code::OK, String::new()));
             break;
@@ -799,6 +868,12 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
                 ));
                 break;
             }
+            deaths.push(format!(
+                "the {} service died ({}) {:.1} s into the run and was restarted",
+                role.name(),
+                describe(st),
+                run_start.elapsed().as_secs_f64()
+            ));
             pipe.carry(role, &monitor);
             pipe.restarts[i] += 1;
             progress.note(&format!(
@@ -876,15 +951,36 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
             None => "not started".to_string(),
         };
     }
+    let mut failures: Vec<String> = Vec::new();
+    if !message.is_empty() {
+        failures.push(first_line(&message));
+    }
     if code == exit_code::OK && !recorded {
         code = exit_code::FAILURE;
+        failures.push("the recorder did not finish its file cleanly".into());
     }
     if code == exit_code::OK && !all_clean {
-        eprintln!(
-            "error: not every service exited cleanly ({})",
-            exits.join(", ")
-        );
+        let msg = format!("not every service exited cleanly ({})", exits.join(", "));
+        eprintln!("error: {msg}");
+        failures.push(msg);
         code = exit_code::SERVICE_FAILED;
+    }
+    let planner_log = run_dir.join("planner.log");
+    let verdict = judge(&Judged {
+        stop,
+        program_given,
+        planner: monitor.get(ServiceRole::Planner),
+        deaths: &deaths,
+        latched_at_s: latched_at,
+        faults_judged_elsewhere: hooks.judges_faults(),
+        planner_log: &planner_log,
+    });
+    for (c, why) in verdict {
+        eprintln!("error: {why}");
+        if code == exit_code::OK {
+            code = c;
+        }
+        failures.push(why);
     }
     // Without final statuses the figures are partial: say so.
     for role in ROLES {
@@ -910,10 +1006,19 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
             fold(totals[i].get_or_insert_with(ServiceStatus::default), st);
         }
     }
+    let program = program_given.then(|| {
+        let p = monitor
+            .get(ServiceRole::Planner)
+            .copied()
+            .unwrap_or_default();
+        ProgramSummary::from_status(&p)
+    });
     let summary = Summary::build(
         RunFacts {
             instance: instance_name.clone(),
             exit_code: code,
+            failures,
+            program,
             stop_reason: stop.name().to_string(),
             rate_hz: cfg.rate_hz,
             lockstep: cfg.lockstep,
@@ -931,6 +1036,108 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     drop(monitor);
     instance::clean_leftovers(&instance_name);
     Ok((code, summary))
+}
+
+/// What [`judge`] looks at once the pipeline has stopped.
+struct Judged<'a> {
+    stop: Stop,
+    program_given: bool,
+    /// The planner's last status (its final one after a clean stop).
+    planner: Option<&'a ServiceStatus>,
+    /// Every service death the restart policy recovered from.
+    deaths: &'a [String],
+    /// Seconds into the run at which the actuator's safe state latched, if it was still
+    /// latched at the stop.
+    latched_at_s: Option<f64>,
+    /// The soak injects faults on purpose and judges them itself.
+    faults_judged_elsewhere: bool,
+    planner_log: &'a Path,
+}
+
+/// The run's verdict beyond the stop itself: each reason the job asked for did not
+/// happen, with its exit code (one of [`exit_code`]). Empty: the job ran to its end.
+fn judge(j: &Judged<'_>) -> Vec<(u8, String)> {
+    let mut out = Vec::new();
+    if j.program_given && j.stop != Stop::ServiceFailed && j.stop != Stop::Timeout {
+        let p = j.planner.copied().unwrap_or_default();
+        let state = ProgramState::from_wire(p.program_state).unwrap_or(ProgramState::None);
+        let end = ProgramEnd::from_wire(p.program_end).unwrap_or(ProgramEnd::None);
+        let detail = || {
+            let lines = log_lines_with(j.planner_log, "planner: program", 2);
+            if lines.is_empty() {
+                String::new()
+            } else {
+                format!(" (planner log: {})", lines.join(" | "))
+            }
+        };
+        match (state, j.stop) {
+            (ProgramState::Finished, _) => {}
+            (ProgramState::Abandoned, _) => out.push((
+                exit_code::JOB_FAILED,
+                format!(
+                    "the program was abandoned at program time {:.3} s: {}{}",
+                    p.motion_time_s,
+                    end.describe(),
+                    detail()
+                ),
+            )),
+            (ProgramState::NotRun, _) => out.push((
+                exit_code::JOB_FAILED,
+                format!("the program was not run: {}{}", end.describe(), detail()),
+            )),
+            // `--duration` bounds the job: a program still running then is not a failure.
+            (_, Stop::Duration) => {}
+            (_, Stop::Interrupted) => out.push((
+                exit_code::INTERRUPTED,
+                format!(
+                    "interrupted before the program finished (program {} at {:.3} s)",
+                    state.name(),
+                    p.motion_time_s
+                ),
+            )),
+            (_, _) => out.push((
+                exit_code::JOB_FAILED,
+                format!(
+                    "the run stopped ({}) but the planner reports its program {}",
+                    j.stop.name(),
+                    state.name()
+                ),
+            )),
+        }
+    }
+    if !j.faults_judged_elsewhere {
+        for d in j.deaths {
+            out.push((exit_code::SERVICE_FAILED, d.clone()));
+        }
+        if let Some(t) = j.latched_at_s {
+            out.push((
+                exit_code::JOB_FAILED,
+                format!(
+                    "the actuator's safe state latched {t:.1} s into the run and was not reset by the end"
+                ),
+            ));
+        }
+    }
+    out
+}
+
+/// The last `n` lines of `log` that contain `needle`, trimmed of their timestamp prefix.
+fn log_lines_with(log: &Path, needle: &str, n: usize) -> Vec<String> {
+    let Ok(text) = std::fs::read_to_string(log) else {
+        return Vec::new();
+    };
+    let mut lines: Vec<String> = text
+        .lines()
+        .filter_map(|l| l.find(needle).map(|i| l[i..].trim().to_string()))
+        .collect();
+    let keep = lines.len().saturating_sub(n);
+    lines.drain(..keep);
+    lines
+}
+
+/// The first line of a (possibly multi-line) message.
+fn first_line(msg: &str) -> String {
+    msg.lines().next().unwrap_or_default().to_string()
 }
 
 /// Starts `microrobot record` for the instance and waits until all its subscribers are

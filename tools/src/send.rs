@@ -25,7 +25,7 @@ pub struct SendArgs {
     pub instance: String,
     /// Pipeline config whose robot is used to check targets before sending (skipped
     /// when the file does not exist).
-    #[arg(long, default_value = "config/pipeline.toml", value_name = "FILE")]
+    #[arg(long, default_value_os_t = crate::config_path::default_config(), value_name = "FILE")]
     pub config: PathBuf,
     /// How long to wait for the planner (connection and verdict), in s.
     #[arg(long, default_value_t = 10.0, value_name = "S")]

@@ -35,7 +35,7 @@ pub struct TeleopReportArgs {
     #[arg(long, default_value = "default", value_name = "NAME")]
     pub instance: String,
     /// The pipeline's config (robot, `[teleop]` ratio and frame).
-    #[arg(long, default_value = "config/pipeline.toml", value_name = "FILE")]
+    #[arg(long, default_value_os_t = crate::config_path::default_config(), value_name = "FILE")]
     pub config: PathBuf,
     /// How long to listen (s).
     #[arg(long, default_value_t = 10.0, value_name = "S")]

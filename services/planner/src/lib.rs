@@ -34,8 +34,9 @@ pub mod teleop;
 use anyhow::Context as _;
 use microrobot_messages::{
     CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState, MAX_JOINTS,
-    MasterPose, MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole, ServiceStatus,
-    TargetSpace, monotonic_ns, open_event, open_publish_subscribe, setpoint_flags, state_flags,
+    MasterPose, MotionCommand, ProfileKind, ProgramEnd, ProgramState, RefusalReason, ServiceKind,
+    ServiceRole, ServiceStatus, TargetSpace, monotonic_ns, open_event, open_publish_subscribe,
+    setpoint_flags, state_flags,
 };
 use microrobot_model::ik::{IkOptions, IkTarget};
 use microrobot_model::{ModelData, Robot};
@@ -175,6 +176,9 @@ pub struct PlannerCore {
     mode: Mode,
     program: Option<ProgramRunner>,
     program_done: bool,
+    /// Where the configured program stands, and why it ended early (for the status).
+    program_state: ProgramState,
+    program_end: ProgramEnd,
     started: bool,
     tick: u64,
     state_seq: SeqTracker,
@@ -198,6 +202,12 @@ pub struct PlannerCore {
     teleop_at_start: bool,
     /// The measured state was stale at the last check (teleop holds meanwhile).
     state_stale: bool,
+}
+
+/// The limits the planner plans its program within: the robot's, scaled by
+/// `planner.limit_scale` (a program's own `[limits]` replace the rates).
+pub fn program_limits(robot: &Robot, cfg: &PipelineConfig) -> KinematicLimits {
+    scaled(robot, cfg.planner.limit_scale)
 }
 
 fn scaled(robot: &Robot, scale: f64) -> KinematicLimits {
@@ -231,6 +241,12 @@ impl PlannerCore {
             current: Sample::default(),
             mode: Mode::Hold,
             program_done: program.is_none(),
+            program_state: if program.is_some() {
+                ProgramState::Pending
+            } else {
+                ProgramState::None
+            },
+            program_end: ProgramEnd::None,
             program,
             started: false,
             tick: 0,
@@ -279,6 +295,27 @@ impl PlannerCore {
     /// Whether the program (if any) has finished or was abandoned, and the arm is at rest.
     pub fn program_done(&self) -> bool {
         self.program_done
+    }
+
+    /// Where the configured program stands: pending, running, finished, abandoned or
+    /// not run, and why it ended early ([`ProgramEnd::None`] otherwise).
+    pub fn program_outcome(&self) -> (ProgramState, ProgramEnd) {
+        (self.program_state, self.program_end)
+    }
+
+    /// The program will not run (or run on): `state` with `why`, logged once.
+    fn end_program(&mut self, state: ProgramState, why: ProgramEnd) {
+        self.program_running = false;
+        if self.program.take().is_some() {
+            self.program_state = state;
+            self.program_end = why;
+            let verb = if state == ProgramState::NotRun {
+                "not run"
+            } else {
+                "abandoned"
+            };
+            tracing::warn!("planner: program {verb}: {}", why.describe());
+        }
     }
 
     /// Logical time of the last setpoint (s).
@@ -347,24 +384,16 @@ impl PlannerCore {
             if safe {
                 // The actuator is latched: mirror the measured arm from the first tick
                 // (as `check_state` would from the next one).
-                if self.program.take().is_some() {
-                    tracing::warn!(
-                        "planner: the actuator is in its safe state: the program is not run"
-                    );
-                }
+                self.end_program(ProgramState::NotRun, ProgramEnd::SafeState);
                 self.mode = Mode::SafeHold;
             } else if moving {
                 // Bring the arm to rest from where it is (jerk-limited, bumpless).
-                if self.program.take().is_some() {
-                    tracing::warn!("planner: the arm is moving at start: the program is not run");
-                }
+                self.end_program(ProgramState::NotRun, ProgramEnd::MovingAtStart);
                 if self.brake(false).is_err() {
                     self.current.qd = JointVector::zeros();
                 }
             } else if self.teleop_at_start {
-                if self.program.take().is_some() {
-                    tracing::warn!("planner: teleop.enabled: the program is not run");
-                }
+                self.end_program(ProgramState::NotRun, ProgramEnd::TeleopAtStart);
                 if let Err(e) = self.enter_teleop() {
                     tracing::error!("planner: cannot start in teleop mode: {e}");
                 }
@@ -398,22 +427,22 @@ impl PlannerCore {
                     p.duration()
                 );
                 self.program_running = true;
+                self.program_state = ProgramState::Running;
                 self.mode = Mode::Moving;
             }
             Err(e) => {
                 tracing::error!(
-                    "planner: program cannot be planned from the measured state, program abandoned: {e}"
+                    "planner: program cannot be planned from the measured state, program not run: {e}"
                 );
                 self.program = None;
+                self.program_state = ProgramState::NotRun;
+                self.program_end = ProgramEnd::CannotPlan;
             }
         }
     }
 
-    fn abandon_program(&mut self) {
-        self.program_running = false;
-        if self.program.take().is_some() {
-            tracing::warn!("planner: program abandoned by a run-time command");
-        }
+    fn abandon_program(&mut self, why: ProgramEnd) {
+        self.end_program(ProgramState::Abandoned, why);
     }
 
     fn brake(&mut self, estop: bool) -> Result<(), CommandError> {
@@ -477,7 +506,7 @@ impl PlannerCore {
             CommandKind::EStop => {
                 self.counters.estops += 1;
                 self.estop_at_ns = Some(now_ns);
-                self.abandon_program();
+                self.abandon_program(ProgramEnd::Command);
                 if self.mode == Mode::SafeHold {
                     // The actuator already holds; stay with it, but remember the e-stop.
                     return Ok(());
@@ -486,7 +515,7 @@ impl PlannerCore {
             }
             CommandKind::Stop => {
                 self.check_motion_allowed()?;
-                self.abandon_program();
+                self.abandon_program(ProgramEnd::Command);
                 self.brake(false)
             }
             CommandKind::Teleop => {
@@ -502,7 +531,7 @@ impl PlannerCore {
             CommandKind::Move => {
                 self.check_motion_allowed()?;
                 let t = self.plan_move(c)?;
-                self.abandon_program();
+                self.abandon_program(ProgramEnd::Command);
                 self.motion = Some(Generator::new(t));
                 self.mode = Mode::Moving;
                 self.program_done = false;
@@ -660,7 +689,7 @@ impl PlannerCore {
                 tracing::warn!(
                     "planner: the actuator reports its safe state; following the measured state"
                 );
-                self.abandon_program();
+                self.abandon_program(ProgramEnd::SafeState);
                 self.motion = None;
                 self.mode = Mode::SafeHold;
             }
@@ -677,7 +706,7 @@ impl PlannerCore {
         {
             self.counters.stale_cycles += 1;
             tracing::warn!("planner: measured state is stale; stopping");
-            self.abandon_program();
+            self.abandon_program(ProgramEnd::StaleState);
             let _ = self.brake(false);
         } else if !self.lockstep && check_fresh(s.header.stamp_ns, now_ns, self.stale_ns).is_err() {
             self.counters.stale_cycles += 1;
@@ -720,6 +749,7 @@ impl PlannerCore {
                     if self.program_running {
                         self.program_running = false;
                         self.program = None;
+                        self.program_state = ProgramState::Finished;
                         tracing::info!("planner: program finished");
                     }
                     // Hold exactly at rest.
@@ -945,6 +975,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         st.commands_refused = core.counters.commands_refused;
         st.motion_time_s = core.motion_time_s();
         st.program_done = core.program_done() as u32;
+        let (state, end) = core.program_outcome();
+        st.program_state = state as u32;
+        st.program_end = end as u32;
         st.latency = lat.summary();
     };
 

@@ -44,6 +44,11 @@ impl ProgramRunner {
         &self.program.name
     }
 
+    /// The loaded program (segments in SI units).
+    pub fn program(&self) -> &Program {
+        &self.program
+    }
+
     /// Plans every segment from `start` within `limits` (allocates; done once).
     pub fn plan(
         &mut self,

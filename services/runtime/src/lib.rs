@@ -28,20 +28,30 @@ pub use status::StatusPort;
 pub use timer::{PeriodicClock, Ticker, TimerFd};
 pub use watchdog::{Freshness, Watchdog};
 
-/// Process exit codes shared by the services and the supervisor.
+/// Process exit codes shared by the services and every `microrobot` command; one meaning
+/// each (the README's "Exit codes" table lists them).
 pub mod exit_code {
-    /// Clean exit (also after SIGINT/SIGTERM).
+    /// The job asked for ran to its end (a service: a clean exit, also after SIGINT/SIGTERM).
     pub const OK: u8 = 0;
-    /// Any other failure.
+    /// Any other failure (an I/O error, an unreadable input file, a missing instance).
     pub const FAILURE: u8 = 1;
-    /// The config file (or a file it names) was refused.
-    pub const BAD_CONFIG: u8 = 2;
-    /// Supervisor: a service failed and was not restarted.
+    /// The command line was not understood (clap's usage errors).
+    pub const USAGE: u8 = 2;
+    /// Supervisor: a service exited with an error or died (restarted or not).
     pub const SERVICE_FAILED: u8 = 3;
-    /// Supervisor: a service did not become ready, or the run did not finish, in time.
+    /// Supervisor: a service did not become ready (or stopped reporting) in time.
     pub const TIMEOUT: u8 = 4;
     /// A live process already runs this instance (same instance name).
     pub const INSTANCE_IN_USE: u8 = 5;
+    /// The config, robot or program file (or a command-line override) was refused before
+    /// anything started.
+    pub const BAD_CONFIG: u8 = 6;
+    /// The pipeline ran but the job did not happen: the program was abandoned or not run,
+    /// the actuator's safe state was latched and not reset by the end, a command or
+    /// check was refused.
+    pub const JOB_FAILED: u8 = 7;
+    /// Stopped by SIGINT/SIGTERM (Ctrl-C) before the job was done (128 + SIGINT).
+    pub const INTERRUPTED: u8 = 130;
 }
 
 /// A service's main loop: runs until the program is done or `shutdown` is requested.

@@ -35,7 +35,7 @@ use report::{Facts, Floor, Kill, Report};
 #[derive(Debug, Clone, clap::Args)]
 pub struct SoakArgs {
     /// Pipeline config (its program is replaced by the soak's own motion commands).
-    #[arg(long, default_value = "config/pipeline.toml")]
+    #[arg(long, default_value_os_t = crate::config_path::default_config())]
     pub config: PathBuf,
     /// How long: `90s`, `10m`, `1h` (a bare number is seconds).
     #[arg(long, default_value = "60s", value_parser = parse_duration)]
@@ -367,7 +367,7 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
     } else if v.pass {
         exit_code::OK
     } else {
-        exit_code::FAILURE
+        exit_code::JOB_FAILED
     })
 }
 
@@ -434,6 +434,10 @@ impl Soak {
 }
 
 impl Hooks for Soak {
+    fn judges_faults(&self) -> bool {
+        true
+    }
+
     fn before_start(&mut self, cfg: &microrobot_runtime::PipelineConfig) -> anyhow::Result<()> {
         self.observer = Some(Observer::start(&cfg.instance, self.bounds)?);
         self.port = Some(CommandPort::open(&cfg.instance)?);

@@ -4,7 +4,10 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use microrobot_messages::{LatencySummary, LifecycleState, MAX_JOINTS, ServiceRole, ServiceStatus};
+use microrobot_messages::{
+    LatencySummary, LifecycleState, MAX_JOINTS, ProgramEnd, ProgramState, ServiceRole,
+    ServiceStatus,
+};
 use serde::{Deserialize, Serialize};
 
 use super::monitor::slot;
@@ -60,12 +63,43 @@ pub struct ServiceSummary {
     pub latency_us: Percentiles,
 }
 
+/// The motion program's outcome, from the planner's last status.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ProgramSummary {
+    /// `pending`, `running`, `finished`, `abandoned` or `not_run`.
+    pub state: String,
+    /// Why it was abandoned or not run, in words (null otherwise).
+    pub end_reason: Option<String>,
+    /// Program time reached (s).
+    pub time_s: f64,
+}
+
+impl ProgramSummary {
+    /// From the planner's status.
+    pub fn from_status(p: &ServiceStatus) -> Self {
+        let state = ProgramState::from_wire(p.program_state).unwrap_or(ProgramState::None);
+        let end = ProgramEnd::from_wire(p.program_end).unwrap_or(ProgramEnd::None);
+        Self {
+            state: state.name().to_string(),
+            end_reason: (end != ProgramEnd::None).then(|| end.describe().to_string()),
+            time_s: p.motion_time_s,
+        }
+    }
+}
+
 /// Everything `microrobot run` reports at the end.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
     pub instance: String,
+    /// True exactly when the job asked for ran to its end (`exit_code` 0).
     pub exit_ok: bool,
     pub exit_code: u8,
+    /// Every reason the run failed, one sentence each (empty when `exit_ok`).
+    #[serde(default)]
+    pub failures: Vec<String>,
+    /// The motion program's outcome (null when the run had no program).
+    #[serde(default)]
+    pub program: Option<ProgramSummary>,
     /// Why the run stopped: program_done, duration, interrupted, service_failed, timeout.
     pub stop_reason: String,
     pub rate_hz: f64,
@@ -150,6 +184,8 @@ pub fn fold(acc: &mut ServiceStatus, s: &ServiceStatus) {
     acc.commands_refused += s.commands_refused;
     acc.motion_time_s = s.motion_time_s;
     acc.program_done = s.program_done;
+    acc.program_state = s.program_state;
+    acc.program_end = s.program_end;
     acc.cpu_time_ms = acc.cpu_time_ms.saturating_add(s.cpu_time_ms);
     acc.rss_kib = acc.rss_kib.max(s.rss_kib);
     acc.estops += s.estops;
@@ -186,6 +222,8 @@ pub fn lifecycle_name(v: u32) -> &'static str {
 pub struct RunFacts {
     pub instance: String,
     pub exit_code: u8,
+    pub failures: Vec<String>,
+    pub program: Option<ProgramSummary>,
     pub stop_reason: String,
     pub rate_hz: f64,
     pub lockstep: bool,
@@ -268,6 +306,8 @@ impl Summary {
             instance: facts.instance,
             exit_ok: facts.exit_code == 0,
             exit_code: facts.exit_code,
+            failures: facts.failures,
+            program: facts.program,
             stop_reason: facts.stop_reason,
             rate_hz: facts.rate_hz,
             lockstep: facts.lockstep,
@@ -408,13 +448,31 @@ impl Summary {
             "  deadline misses {}, lost messages {}, logs in {}",
             self.deadline_misses, self.lost_messages, self.run_dir
         );
+        if let Some(p) = &self.program {
+            let _ = writeln!(
+                s,
+                "  program:            {} at {:.3} s{}",
+                p.state.replace('_', " "),
+                p.time_s,
+                p.end_reason
+                    .as_deref()
+                    .map(|r| format!(" ({r})"))
+                    .unwrap_or_default()
+            );
+        }
         let _ = write!(
             s,
             "  result: {}",
             if self.exit_ok {
                 "ok".to_string()
-            } else {
+            } else if self.failures.is_empty() {
                 format!("FAILED (exit code {})", self.exit_code)
+            } else {
+                format!(
+                    "FAILED (exit code {}): {}",
+                    self.exit_code,
+                    self.failures.join("; ")
+                )
             }
         );
         s

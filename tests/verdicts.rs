@@ -1,0 +1,189 @@
+//! A run's verdict is a promise: `run` exits 0 with `exit_ok: true` only when the job
+//! asked for ran to its end. A program refused before start, abandoned mid-run or never
+//! run, and a safe state latched and left so, each end FAILED with the reason on stderr,
+//! a non-zero exit and `exit_ok: false`.
+
+mod common;
+
+use std::path::Path;
+use std::time::Duration;
+
+use common::*;
+use microrobot_messages::ServiceRole;
+use microrobot_runtime::exit_code;
+
+fn s(p: &Path) -> String {
+    p.to_str().expect("utf-8 path").to_string()
+}
+
+/// A one-segment program to `q_deg` (soft motion), written into `dir`.
+fn program(dir: &Path, name: &str, q_deg: [f64; 6]) -> std::path::PathBuf {
+    let q: Vec<String> = q_deg.iter().map(|v| format!("{v:.1}")).collect();
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(
+        &path,
+        format!(
+            "[program]\nname = \"{name}\"\ndof = 6\n[[segment]]\nname = \"{name}\"\nq_deg = [{}]\nprofile = \"soft\"\n",
+            q.join(", ")
+        ),
+    )
+    .expect("write program");
+    path
+}
+
+#[test]
+fn a_program_target_outside_a_joint_range_is_refused_before_anything_starts() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("verdict-range");
+    let cfg = write_config(dir.path(), &inst, "", "");
+    // j5's range is [-90°, 90°].
+    let prog = program(dir.path(), "too-far", [0.0, 0.0, 20.0, 0.0, 120.0, 0.0]);
+    let sum = dir.path().join("summary.json");
+    let out = run(
+        &[
+            "run",
+            "--config",
+            &s(&cfg),
+            "--program",
+            &s(&prog),
+            "--summary-json",
+            &s(&sum),
+        ],
+        60.0,
+    );
+    assert_eq!(
+        out.code(),
+        Some(exit_code::BAD_CONFIG as i32),
+        "stderr:\n{}",
+        out.stderr
+    );
+    for needle in ["j5", "120", "outside its range", "too-far"] {
+        assert!(
+            out.stderr.contains(needle),
+            "`{needle}` in stderr:\n{}",
+            out.stderr
+        );
+    }
+    assert!(
+        !out.stderr.contains("ready"),
+        "no service was started:\n{}",
+        out.stderr
+    );
+    assert!(!sum.exists(), "no summary of a run that never started");
+    assert_eq!(remaining_nodes(&inst), Vec::<String>::new());
+
+    // `check` finds the same error, with the same exit code.
+    let check = run(
+        &["check", "--config", &s(&cfg), "--program", &s(&prog), "-q"],
+        60.0,
+    );
+    assert_eq!(check.code(), Some(exit_code::BAD_CONFIG as i32));
+    assert!(check.stdout.contains("j5 target 120"), "{}", check.stdout);
+    assert!(check.stdout.contains("check: FAILED"), "{}", check.stdout);
+    // And passes the shipped program.
+    let ok = run(
+        &[
+            "check",
+            "--config",
+            &s(&cfg),
+            "-q",
+            "--program",
+            &s(&table4_program()),
+        ],
+        60.0,
+    );
+    assert_eq!(ok.code(), Some(0), "{}{}", ok.stdout, ok.stderr);
+    assert!(ok.stdout.contains("check: ok"), "{}", ok.stdout);
+}
+
+/// Starts the Table 4 program (8.5 s), freezes `victim` with SIGSTOP for `freeze`
+/// 1 s into the motion, resumes it, and waits for the run's end.
+fn freeze_mid_program(
+    tag: &str,
+    victim: ServiceRole,
+    freeze: Duration,
+) -> (Finished, serde_json::Value) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance(tag);
+    let cfg = write_config(
+        dir.path(),
+        &inst,
+        &format!("program = \"{}\"", table4_program().display()),
+        "",
+    );
+    let sum = dir.path().join("summary.json");
+    let proc = start(&["run", "--config", &s(&cfg), "--summary-json", &s(&sum)]);
+    wait_ready(&inst, 60.0);
+    std::thread::sleep(Duration::from_millis(1000));
+    let pid = pid_of(&inst, victim).expect("victim pid");
+    // SAFETY: kill(2) on a child of the pipeline this test started.
+    unsafe { libc::kill(pid, libc::SIGSTOP) };
+    std::thread::sleep(freeze);
+    // SAFETY: as above.
+    unsafe { libc::kill(pid, libc::SIGCONT) };
+    let out = proc.finish(120.0);
+    (out, summary(&sum))
+}
+
+#[test]
+fn a_program_abandoned_because_the_measured_state_went_stale_fails_the_run() {
+    let (out, sum) = freeze_mid_program(
+        "verdict-stale",
+        ServiceRole::Actuator,
+        Duration::from_millis(1000),
+    );
+    assert_eq!(
+        out.code(),
+        Some(exit_code::JOB_FAILED as i32),
+        "stderr:\n{}",
+        out.stderr
+    );
+    assert_eq!(sum["exit_ok"], false, "{sum}");
+    assert_eq!(sum["program"]["state"], "abandoned", "{sum}");
+    assert!(out.stderr.contains("abandoned"), "{}", out.stderr);
+    assert!(out.stderr.contains("stale"), "{}", out.stderr);
+    assert!(out.stdout.contains("result: FAILED"), "{}", out.stdout);
+}
+
+#[test]
+fn a_safe_state_latched_by_a_frozen_dynamics_fails_the_run() {
+    let (out, sum) = freeze_mid_program(
+        "verdict-latch",
+        ServiceRole::Dynamics,
+        Duration::from_millis(2000),
+    );
+    assert_eq!(
+        out.code(),
+        Some(exit_code::JOB_FAILED as i32),
+        "stderr:\n{}",
+        out.stderr
+    );
+    assert_eq!(sum["exit_ok"], false, "{sum}");
+    assert_eq!(sum["program"]["state"], "abandoned", "{sum}");
+    let failures = sum["failures"].to_string();
+    assert!(failures.contains("safe state"), "{failures}");
+    assert!(out.stderr.contains("safe state latched"), "{}", out.stderr);
+}
+
+#[test]
+fn a_finished_program_passes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("verdict-ok");
+    let prog = program(dir.path(), "short", [10.0, 5.0, 20.0, 0.0, 5.0, 0.0]);
+    let cfg = write_config(
+        dir.path(),
+        &inst,
+        &format!("program = \"{}\"", prog.display()),
+        "",
+    );
+    let sum = dir.path().join("summary.json");
+    let out = run(
+        &["run", "--config", &s(&cfg), "--summary-json", &s(&sum)],
+        120.0,
+    );
+    assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
+    let sum = summary(&sum);
+    assert_eq!(sum["exit_ok"], true, "{sum}");
+    assert_eq!(sum["program"]["state"], "finished", "{sum}");
+    assert_eq!(sum["failures"], serde_json::json!([]), "{sum}");
+}
