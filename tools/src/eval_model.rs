@@ -10,6 +10,9 @@ use std::io::{BufRead, Write};
 use std::path::Path;
 
 use anyhow::Context;
+use microrobot_runtime::exit_code;
+
+use crate::exit::with_code;
 use microrobot_model::{
     JointVector, MAX_JOINTS, ModelData, Robot, coriolis_torque, gravity_torque, jacobian,
     lagrange_euler, mass_matrix, rnea,
@@ -30,14 +33,16 @@ pub enum Method {
 /// Runs the interface on stdin/stdout for the robot file at `robot_path`.
 pub fn run(robot_path: &Path, method: Method) -> anyhow::Result<()> {
     let robot = Robot::from_file(robot_path)
-        .with_context(|| format!("loading {}", robot_path.display()))?;
+        .with_context(|| format!("loading {}", robot_path.display()))
+        .map_err(with_code(exit_code::BAD_CONFIG))?;
     let stdin = std::io::stdin();
     let stdout = std::io::stdout();
     process(&robot, method, stdin.lock(), stdout.lock())
 }
 
 /// Processes every line of `input`, writing one output line each to `output`.
-/// Only I/O failures end it early; bad lines produce error lines.
+/// Only I/O failures end it early; bad lines produce error lines, and the command then
+/// fails (`JOB_FAILED`) once every line is answered.
 pub fn process(
     robot: &Robot,
     method: Method,
@@ -45,18 +50,33 @@ pub fn process(
     mut output: impl Write,
 ) -> anyhow::Result<()> {
     let mut data = ModelData::new(robot);
+    let (mut lines, mut refused) = (0usize, 0usize);
     for (index, line) in input.lines().enumerate() {
         let line = line.context("reading stdin")?;
         if line.trim().is_empty() {
             continue;
         }
+        lines += 1;
         let reply = match evaluate_line(robot, &mut data, method, &line) {
             Ok(v) => v,
-            Err(message) => json!({ "error": format!("line {}: {message}", index + 1) }),
+            Err(message) => {
+                refused += 1;
+                json!({ "error": format!("line {}: {message}", index + 1) })
+            }
         };
         serde_json::to_writer(&mut output, &reply).context("writing stdout")?;
         output.write_all(b"\n").context("writing stdout")?;
         output.flush().context("flushing stdout")?;
+    }
+    refused_lines(refused, lines)
+}
+
+/// `JOB_FAILED` when any of `lines` input lines was answered with an error line.
+pub fn refused_lines(refused: usize, lines: usize) -> anyhow::Result<()> {
+    if refused > 0 {
+        return Err(with_code(exit_code::JOB_FAILED)(anyhow::anyhow!(
+            "{refused} of {lines} input line(s) could not be evaluated (their output lines say why)"
+        )));
     }
     Ok(())
 }

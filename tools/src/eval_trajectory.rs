@@ -58,15 +58,21 @@ pub fn run() -> anyhow::Result<()> {
     let stdin = std::io::stdin();
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
+    let (mut lines, mut refused) = (0usize, 0usize);
     for line in stdin.lock().lines() {
         let line = line?;
         if line.trim().is_empty() {
             continue;
         }
-        writeln!(out, "{}", eval_line(&line))?;
+        lines += 1;
+        let answer = eval_line(&line);
+        if answer.starts_with("{\"error\"") {
+            refused += 1;
+        }
+        writeln!(out, "{answer}")?;
         out.flush()?;
     }
-    Ok(())
+    crate::eval_model::refused_lines(refused, lines)
 }
 
 /// Answers one problem line (a JSON object) with one JSON line.

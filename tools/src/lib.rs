@@ -4,6 +4,7 @@ pub mod check;
 pub mod config_path;
 pub mod eval_model;
 pub mod eval_trajectory;
+pub mod exit;
 pub mod probe_chain;
 pub mod recording;
 pub mod run;

@@ -80,6 +80,16 @@ enum EvalCommand {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if !matches!(
+        cli.command,
+        Command::Run(_) | Command::Soak(_) | Command::Service(_) | Command::Record(_)
+    ) {
+        // A closed stdout (`| head`) ends a printing command quietly, as it does `cat`,
+        // instead of a panic in println!. The supervisor and the services keep Rust's
+        // default (SIGPIPE ignored): a closed pipe must never kill a pipeline.
+        // SAFETY: signal(2) with SIG_DFL, before any thread is started.
+        unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
+    }
     let result = match cli.command {
         Command::Run(args) => return run::main(args),
         Command::Check(args) => return check::main(args),
@@ -102,7 +112,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::from(microrobot_runtime::exit_code::FAILURE)
+            ExitCode::from(microrobot_cli::exit::code_of(&e))
         }
     }
 }

@@ -356,11 +356,13 @@ pub fn main(args: ReplayArgs) -> Result<()> {
         );
     }
     if let Some(d) = &report.first_difference {
-        bail!(
+        return Err(crate::exit::with_code(
+            microrobot_runtime::exit_code::JOB_FAILED,
+        )(anyhow::anyhow!(
             "replay differs from the recording in {} of {} torques; first: {d}",
             report.differences,
             report.compared
-        );
+        )));
     }
     eprintln!(
         "replay: all {} torques bit-identical ({} unverifiable, config {})",
