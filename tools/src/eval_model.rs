@@ -12,6 +12,7 @@ use std::path::Path;
 use anyhow::Context;
 use microrobot_runtime::exit_code;
 
+use crate::eval_trajectory::RefusedLines;
 use crate::exit::with_code;
 use microrobot_model::{
     JointVector, MAX_JOINTS, ModelData, Robot, coriolis_torque, gravity_torque, jacobian,
@@ -71,12 +72,11 @@ pub fn process(
     refused_lines(refused, lines)
 }
 
-/// `JOB_FAILED` when any of `lines` input lines was answered with an error line.
+/// Fails with [`RefusedLines`] when any of `lines` input lines was answered with an
+/// error line.
 pub fn refused_lines(refused: usize, lines: usize) -> anyhow::Result<()> {
     if refused > 0 {
-        return Err(with_code(exit_code::JOB_FAILED)(anyhow::anyhow!(
-            "{refused} of {lines} input line(s) could not be evaluated (their output lines say why)"
-        )));
+        return Err(RefusedLines { refused, lines }.into());
     }
     Ok(())
 }

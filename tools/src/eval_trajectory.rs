@@ -72,8 +72,33 @@ pub fn run() -> anyhow::Result<()> {
         writeln!(out, "{answer}")?;
         out.flush()?;
     }
-    crate::eval_model::refused_lines(refused, lines)
+    if refused > 0 {
+        return Err(RefusedLines { refused, lines }.into());
+    }
+    Ok(())
 }
+
+/// Some input lines were answered with an error line: the job did not fully happen, so
+/// the command fails once every line is answered (the CLI exits `JOB_FAILED`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RefusedLines {
+    /// Lines answered with an error.
+    pub refused: usize,
+    /// Non-empty input lines.
+    pub lines: usize,
+}
+
+impl std::fmt::Display for RefusedLines {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} of {} input line(s) could not be evaluated (their output lines say why)",
+            self.refused, self.lines
+        )
+    }
+}
+
+impl std::error::Error for RefusedLines {}
 
 /// Answers one problem line (a JSON object) with one JSON line.
 pub fn eval_line(line: &str) -> String {
