@@ -2,6 +2,7 @@
 
 pub mod check;
 pub mod config_path;
+pub mod duration;
 pub mod eval_model;
 pub mod eval_trajectory;
 pub mod exit;

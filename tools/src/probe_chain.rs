@@ -42,7 +42,7 @@ pub struct ProbeChainArgs {
     #[arg(long)]
     pub rate_hz: Option<f64>,
     /// How long the source ticks (e.g. 60s, 10m).
-    #[arg(long, default_value = "60s", value_parser = crate::soak::parse_duration)]
+    #[arg(long, default_value = "60s", value_parser = crate::duration::parse)]
     pub duration: f64,
     /// Also write the result as JSON to this file.
     #[arg(long)]

@@ -38,7 +38,7 @@ pub struct RunArgs {
     #[arg(long, default_value_os_t = crate::config_path::default_config())]
     pub config: PathBuf,
     /// Stop after this many seconds (overrides `duration_s`).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub duration: Option<f64>,
     /// Control rate in Hz (overrides `rate_hz`).
     #[arg(long, value_name = "HZ")]

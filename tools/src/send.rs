@@ -28,7 +28,7 @@ pub struct SendArgs {
     #[arg(long, default_value_os_t = crate::config_path::default_config(), value_name = "FILE")]
     pub config: PathBuf,
     /// How long to wait for the planner (connection and verdict), in s.
-    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    #[arg(long, default_value_t = 10.0, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub timeout: f64,
     #[command(subcommand)]
     pub command: SendCommand,
@@ -78,7 +78,7 @@ pub struct MoveArgs {
     #[arg(long, value_enum, default_value = "soft")]
     pub profile: Profile,
     /// Duration in s (required for cubic, quintic, lspb; for soft, 0 = time-optimal).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse_or_zero)]
     pub duration: Option<f64>,
     /// Scale (0, 1] of the robot's velocity, acceleration and jerk limits.
     #[arg(long, default_value_t = 1.0, value_name = "SCALE")]

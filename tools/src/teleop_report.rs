@@ -38,10 +38,10 @@ pub struct TeleopReportArgs {
     #[arg(long, default_value_os_t = crate::config_path::default_config(), value_name = "FILE")]
     pub config: PathBuf,
     /// How long to listen (s).
-    #[arg(long, default_value_t = 10.0, value_name = "S")]
+    #[arg(long, default_value_t = 10.0, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub duration: f64,
     /// Seconds at the start of the engaged stretch left out (filter transient).
-    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    #[arg(long, default_value_t = 1.0, value_name = "DURATION", value_parser = crate::duration::parse_or_zero)]
     pub settle: f64,
     /// Voluntary frequency (Hz); default: the strongest hand motion in 0.2–2 Hz.
     #[arg(long, value_name = "HZ")]

@@ -28,10 +28,10 @@ pub struct TopArgs {
     #[arg(long)]
     pub json: bool,
     /// Refresh period in s.
-    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    #[arg(long, default_value_t = 1.0, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub interval: f64,
     /// Give up if no service reports within this many seconds.
-    #[arg(long, default_value_t = 5.0, value_name = "S")]
+    #[arg(long, default_value_t = 5.0, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub timeout: f64,
 }
 

@@ -44,7 +44,7 @@ pub struct RecordArgs {
     #[arg(long, value_name = "FILE.mcap")]
     pub out: PathBuf,
     /// Stop after this many seconds.
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub duration: Option<f64>,
     /// Create this file once every subscriber is open (the ready signal for a supervisor).
     #[arg(long, value_name = "FILE")]

@@ -38,14 +38,14 @@ pub struct SoakArgs {
     #[arg(long, default_value_os_t = crate::config_path::default_config())]
     pub config: PathBuf,
     /// How long: `90s`, `10m`, `1h` (a bare number is seconds).
-    #[arg(long, default_value = "60s", value_parser = parse_duration)]
+    #[arg(long, default_value = "60s", value_parser = crate::duration::parse)]
     pub duration: f64,
     /// Control rate in Hz (overrides `rate_hz`).
     #[arg(long, value_name = "HZ")]
     pub rate_hz: Option<f64>,
     /// kill -9 a service every SECS seconds, in turn planner, dynamics, actuator; the
     /// supervisor restarts it.
-    #[arg(long, value_name = "SECS")]
+    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub kill_every: Option<f64>,
     /// Random valid moves (replanning mid-motion) and stops, besides the motion cycle.
     #[arg(long)]
@@ -75,28 +75,6 @@ pub struct SoakArgs {
     /// Heading of the rendered markdown.
     #[arg(long, default_value = "Soak report")]
     pub title: String,
-}
-
-/// Parses `90s`, `10m`, `1h`, `1.5h` or a bare number of seconds.
-pub fn parse_duration(text: &str) -> Result<f64, String> {
-    let t = text.trim();
-    let (num, scale) = match t.char_indices().last() {
-        Some((i, 's')) => (&t[..i], 1.0),
-        Some((i, 'm')) => (&t[..i], 60.0),
-        Some((i, 'h')) => (&t[..i], 3600.0),
-        _ => (t, 1.0),
-    };
-    let v: f64 = num
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{text}` is not a duration (e.g. 90s, 10m, 1h)"))?;
-    let s = v * scale;
-    if !s.is_finite() || s <= 0.0 || s > 7.0 * 86400.0 {
-        return Err(format!(
-            "`{text}`: the duration must be > 0 and at most a week"
-        ));
-    }
-    Ok(s)
 }
 
 /// Entry point of `microrobot soak`.
@@ -557,23 +535,5 @@ impl Hooks for Soak {
             " | soak: kills {}, jumps {jumps}, latches {latches}",
             self.kills.len()
         )
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn durations_take_units() {
-        assert_eq!(parse_duration("90s"), Ok(90.0));
-        assert_eq!(parse_duration("10m"), Ok(600.0));
-        assert_eq!(parse_duration("1h"), Ok(3600.0));
-        assert_eq!(parse_duration("1.5h"), Ok(5400.0));
-        assert_eq!(parse_duration("42"), Ok(42.0));
-        assert!(parse_duration("ten").is_err());
-        assert!(parse_duration("0s").is_err());
-        assert!(parse_duration("-1m").is_err());
-        assert!(parse_duration("NaNs").is_err());
     }
 }
