@@ -6,6 +6,7 @@ pub mod duration;
 pub mod eval_model;
 pub mod eval_trajectory;
 pub mod exit;
+pub mod inspect;
 pub mod probe_chain;
 pub mod recording;
 pub mod run;

@@ -10,7 +10,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, replay};
 use microrobot_cli::{
-    check, eval_model, eval_trajectory, probe_chain, run, send, service, soak, study,
+    check, eval_model, eval_trajectory, inspect, probe_chain, run, send, service, soak, study,
     teleop_report, teleop_source, top,
 };
 
@@ -41,6 +41,15 @@ enum Command {
     Send(send::SendArgs),
     /// Show live rates, latencies and health of a running pipeline.
     Top(top::TopArgs),
+    /// List pipeline instances: running ones with robot, rate and uptime, and stale run
+    /// directories.
+    List(inspect::ListArgs),
+    /// Print each message of a stream of a running pipeline as a JSON line.
+    Echo(inspect::EchoArgs),
+    /// Measure the rate of a stream of a running pipeline (from the publishers' stamps).
+    Hz(inspect::HzArgs),
+    /// Print a service's log of an instance's last run (`--follow` to keep reading).
+    Logs(inspect::LogsArgs),
     /// Stand in for a master device: publish a synthetic or recorded hand motion.
     TeleopSource(teleop_source::TeleopSourceArgs),
     /// Tremor attenuation, scaling error, latency and tracking of a teleop pipeline.
@@ -80,6 +89,8 @@ enum EvalCommand {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // iceoryx2's own notices (e.g. "no config file was loaded") only on request.
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     if !matches!(
         cli.command,
         Command::Run(_) | Command::Soak(_) | Command::Service(_) | Command::Record(_)
@@ -97,6 +108,10 @@ fn main() -> ExitCode {
         Command::ProbeChain(args) => probe_chain::main(args),
         Command::Send(args) => send::main(args),
         Command::Top(args) => top::main(args),
+        Command::List(args) => inspect::list(args),
+        Command::Echo(args) => inspect::echo(args),
+        Command::Hz(args) => inspect::hz(args),
+        Command::Logs(args) => inspect::logs(args),
         Command::TeleopSource(args) => teleop_source::main(args),
         Command::TeleopReport(args) => teleop_report::main(args),
         Command::Study(args) => study::main(args),

@@ -141,12 +141,16 @@ pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -
     }
 }
 
-/// Installs the tracing subscriber once (env filter from `RUST_LOG`, default `info`, stderr).
+/// Installs the tracing subscriber once (env filter from `RUST_LOG`, default `info`,
+/// stderr). Colours only on a terminal: a service's stderr is its log file, which must
+/// stay plain text for `grep`, `microrobot logs` and the run's verdict.
 pub fn init_tracing() {
+    use std::io::IsTerminal as _;
     use tracing_subscriber::EnvFilter;
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
         .try_init();
 }
