@@ -187,9 +187,24 @@ mod tests {
         Robot::from_file(&path).unwrap_or_else(|e| panic!("{e}"))
     }
 
+    /// The output lines; the command's result must say how many lines were refused.
     fn lines(method: Method, input: &str) -> Vec<Value> {
         let mut out = Vec::new();
-        process(&seed_arm(), method, input.as_bytes(), &mut out).unwrap_or_else(|e| panic!("{e}"));
+        let result = process(&seed_arm(), method, input.as_bytes(), &mut out);
+        let text = String::from_utf8(out.clone()).unwrap_or_default();
+        let errors = text.lines().filter(|l| l.starts_with("{\"error\"")).count();
+        let total = text.lines().count();
+        match result {
+            Ok(()) => assert_eq!(errors, 0, "an error line, yet the command succeeded"),
+            Err(e) => assert_eq!(
+                e.downcast_ref::<RefusedLines>(),
+                Some(&RefusedLines {
+                    refused: errors,
+                    lines: total
+                }),
+                "{e}"
+            ),
+        }
         String::from_utf8(out)
             .unwrap_or_default()
             .lines()
