@@ -21,7 +21,7 @@ pub use command::{CommandKind, MotionCommand, ProfileKind, TargetSpace};
 pub use master::MasterPose;
 pub use ports::{BusError, ServiceKind, open_event, open_publish_subscribe, service_name};
 pub use status::{
-    LatencySummary, LifecycleState, ProgramEnd, ProgramState, RefusalReason, ServiceRole,
+    Activity, LatencySummary, LifecycleState, ProgramEnd, ProgramState, RefusalReason, ServiceRole,
     ServiceStatus,
 };
 pub use stream::{

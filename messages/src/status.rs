@@ -201,6 +201,59 @@ impl ProgramState {
     }
 }
 
+/// What the planner is doing (`ServiceStatus::activity`), for operators' tools.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Activity {
+    /// Not the planner, or no measured state yet.
+    Starting = 0,
+    /// Holding a position.
+    Hold = 1,
+    /// Executing the configured program.
+    Program = 2,
+    /// Executing a `move` command.
+    Move = 3,
+    /// Braking to rest for a `stop` (or a stale measured state).
+    Stopping = 4,
+    /// Braking for, or holding after, an e-stop; motion refused until reset.
+    EStop = 5,
+    /// Following the arm while the actuator holds it in its latched safe state.
+    SafeHold = 6,
+    /// A master device drives the arm.
+    Teleop = 7,
+}
+
+impl Activity {
+    /// Decodes the wire value, `None` (the Option) for an unknown value.
+    pub fn from_wire(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::Starting,
+            1 => Self::Hold,
+            2 => Self::Program,
+            3 => Self::Move,
+            4 => Self::Stopping,
+            5 => Self::EStop,
+            6 => Self::SafeHold,
+            7 => Self::Teleop,
+            _ => return Option::None,
+        })
+    }
+
+    /// Lower-case name, as tools show it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Starting => "starting",
+            Self::Hold => "hold",
+            Self::Program => "program",
+            Self::Move => "move",
+            Self::Stopping => "stopping",
+            Self::EStop => "e-stop",
+            Self::SafeHold => "safe-state",
+            Self::Teleop => "teleop",
+        }
+    }
+}
+
 /// Why a program was abandoned or never run (`ServiceStatus::program_end`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
@@ -333,4 +386,8 @@ pub struct ServiceStatus {
     pub program_state: u32,
     /// Planner: a [`ProgramEnd`] value, why the program was abandoned or not run.
     pub program_end: u32,
+    /// Planner: an [`Activity`] value, what it is doing (0 elsewhere).
+    pub activity: u32,
+    /// Zero; keeps the size a multiple of 8.
+    pub reserved: u32,
 }

@@ -41,7 +41,9 @@ fn status_layout_is_stable() {
     assert_eq!(offset_of!(ServiceStatus, last_input_refusal), 340);
     assert_eq!(offset_of!(ServiceStatus, program_state), 344);
     assert_eq!(offset_of!(ServiceStatus, program_end), 348);
-    assert_eq!(size_of::<ServiceStatus>(), 352);
+    assert_eq!(offset_of!(ServiceStatus, activity), 352);
+    assert_eq!(offset_of!(ServiceStatus, reserved), 356);
+    assert_eq!(size_of::<ServiceStatus>(), 360);
     assert_eq!(align_of::<ServiceStatus>(), 8);
 }
 
@@ -85,6 +87,11 @@ fn wire_enums_round_trip_and_refuse_unknown_values() {
         assert!(!e.describe().is_empty());
     }
     assert_eq!(ProgramEnd::from_wire(7), None);
+    for v in 0..=7 {
+        let a = Activity::from_wire(v).expect("known activity");
+        assert_eq!(a as u32, v);
+    }
+    assert_eq!(Activity::from_wire(8), None);
 }
 
 #[test]

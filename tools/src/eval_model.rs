@@ -1,8 +1,10 @@
 //! `microrobot eval model --robot FILE [--method newton-euler|lagrange-euler]`:
 //! the model library's machine interface. Reads JSON lines `{"q":[..],"qd":[..],"qdd":[..]}`
 //! (SI: rad or m) on stdin and writes, per input line and in order, one JSON line
-//! `{"fk", "jacobian", "mass_matrix", "gravity_torque", "coriolis_torque", "tau"}`
-//! (fk: 4×4 row-major, metres; jacobian: 6×n, rows vx vy vz wx wy wz) on stdout,
+//! `{"fk", "tool_pose", "jacobian", "mass_matrix", "gravity_torque", "coriolis_torque",
+//! "tau"}` (fk: 4×4 row-major, metres; tool_pose: the same pose as
+//! `[x, y, z, qw, qx, qy, qz]` in m and a unit quaternion, the form `microrobot send move
+//! --pose` takes; jacobian: 6×n, rows vx vy vz wx wy wz) on stdout,
 //! flushed per line. A bad line gets `{"error": "line N: ..."}` and processing
 //! continues. Floats are printed in their shortest round-trip form.
 
@@ -119,7 +121,11 @@ pub fn evaluate_line(
     let qd = joint_vector("qd", &input.qd, n)?;
     let qdd = joint_vector("qdd", &input.qdd, n)?;
 
-    let fk = microrobot_model::tool_pose(robot, data, &q).to_homogeneous();
+    let pose = microrobot_model::tool_pose(robot, data, &q);
+    let fk = pose.to_homogeneous();
+    let iso = pose.to_isometry();
+    let (t, r) = (iso.translation.vector, iso.rotation);
+    let tool_pose = vec![t.x, t.y, t.z, r.w, r.i, r.j, r.k];
     let jac = jacobian(robot, data, &q);
     let (m, g, c, tau) = match method {
         Method::NewtonEuler => (
@@ -143,6 +149,7 @@ pub fn evaluate_line(
     let vec = |v: &JointVector| -> Vec<f64> { (0..n).map(|i| v[i]).collect() };
     let out = Output {
         fk: rows(4, 4, &|i, j| fk[(i, j)]),
+        tool_pose,
         jacobian: rows(6, n, &|i, j| jac[(i, j)]),
         mass_matrix: rows(n, n, &|i, j| m[(i, j)]),
         gravity_torque: vec(&g),
@@ -171,6 +178,7 @@ pub fn evaluate_line(
 #[derive(serde::Serialize)]
 struct Output {
     fk: Vec<Vec<f64>>,
+    tool_pose: Vec<f64>,
     jacobian: Vec<Vec<f64>>,
     mass_matrix: Vec<Vec<f64>>,
     gravity_torque: Vec<f64>,
@@ -210,6 +218,48 @@ mod tests {
             .lines()
             .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
             .collect()
+    }
+
+    #[test]
+    fn tool_pose_is_fk_as_position_and_unit_quaternion() {
+        let line = r#"{"q":[0.3,-0.4,1.1,0.7,-0.5,2.0],"qd":[0,0,0,0,0,0],"qdd":[0,0,0,0,0,0]}"#;
+        let out = lines(Method::NewtonEuler, line);
+        let fk = |i: usize, j: usize| out[0]["fk"][i][j].as_f64().expect("fk entry");
+        let p: Vec<f64> = (0..7)
+            .map(|k| out[0]["tool_pose"][k].as_f64().expect("tool_pose entry"))
+            .collect();
+        for (k, v) in p[..3].iter().enumerate() {
+            assert_eq!(*v, fk(k, 3), "position {k}");
+        }
+        let (w, x, y, z) = (p[3], p[4], p[5], p[6]);
+        assert!((w * w + x * x + y * y + z * z - 1.0).abs() < 1e-12);
+        // The rotation matrix of (w, x, y, z) is fk's 3×3 block.
+        let r = [
+            [
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y - w * z),
+                2.0 * (x * z + w * y),
+            ],
+            [
+                2.0 * (x * y + w * z),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z - w * x),
+            ],
+            [
+                2.0 * (x * z - w * y),
+                2.0 * (y * z + w * x),
+                1.0 - 2.0 * (x * x + y * y),
+            ],
+        ];
+        for (i, row) in r.iter().enumerate() {
+            for (j, v) in row.iter().enumerate() {
+                assert!(
+                    (v - fk(i, j)).abs() < 1e-12,
+                    "R[{i}][{j}] {v} vs {}",
+                    fk(i, j)
+                );
+            }
+        }
     }
 
     #[test]

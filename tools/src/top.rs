@@ -1,7 +1,10 @@
-//! `microrobot top`: a live table of a running pipeline's services from their status
-//! stream: cycles/s, latency p50/p99 (planner: wake-up lateness, dynamics: setpoint →
-//! torque, actuator: end-to-end), misses, lost, refused, stale, faults, lifecycle, and the
-//! planner's e-stop latency (receipt of the last e-stop → its first braking setpoint).
+//! `microrobot top`: a live view of a running pipeline. The services from their status
+//! stream: cycles/s, each one's own timing p50/p99 (planner: wake-up lateness; dynamics:
+//! setpoint → torque; actuator: end-to-end latency), misses, lost, refused, stale, faults,
+//! lifecycle, silence (a live process whose status stopped is shown as hung), the
+//! planner's e-stop latency; then what the arm does: the planner's activity (program,
+//! move, hold, e-stop, safe state, teleop) and program state, each joint's measured
+//! position and commanded torque, and the tool pose. It exits when the pipeline ends.
 
 use std::io::IsTerminal as _;
 use std::sync::Arc;
@@ -9,9 +12,17 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::ensure;
-use microrobot_messages::ServiceRole;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use microrobot_messages::{
+    Activity, JointState, MAX_JOINTS, ProgramState, ServiceKind, ServiceRole, ServiceStatus,
+    TorqueCommand, open_publish_subscribe,
+};
+use microrobot_model::{JointKind, JointVector, ModelData, Robot};
+use microrobot_runtime::PipelineConfig;
 use serde::Serialize;
 
+use crate::supervisor::instance;
 use crate::supervisor::monitor::StatusMonitor;
 use crate::supervisor::summary::lifecycle_name;
 
@@ -61,6 +72,28 @@ pub struct Row {
     pub rss_kib: u64,
     /// Seconds since this service's last status arrived.
     pub age_s: f64,
+    /// `ok`, `silent` (no status for over a second, process alive: hung?) or `gone`.
+    pub health: &'static str,
+    /// What `latency_*` measures for this service.
+    pub latency_is: &'static str,
+}
+
+/// What the arm does, from the planner's status and the state and torque streams.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct Arm {
+    pub activity: String,
+    pub program: String,
+    pub program_time_s: f64,
+    /// Joint names (from the instance's robot, else j1..jn).
+    pub joints: Vec<String>,
+    /// Measured positions in the unit shown beside (`deg` or `mm`).
+    pub q: Vec<f64>,
+    pub q_units: Vec<&'static str>,
+    /// Commanded torques (N·m, or N for prismatic joints).
+    pub torque: Vec<f64>,
+    /// Tool pose `[x, y, z, qw, qx, qy, qz]` (m, unit quaternion), as `send move --pose`
+    /// takes it; null without the robot.
+    pub tool_pose: Option<[f64; 7]>,
 }
 
 const ORDER: [ServiceRole; 3] = [
@@ -77,6 +110,16 @@ fn rows(monitor: &StatusMonitor) -> Vec<Row> {
         };
         let st = seen.status;
         let us = |ns: u64| ns as f64 / 1000.0;
+        let age_s = seen.at.elapsed().as_secs_f64();
+        // SAFETY: kill with signal 0 only checks that the process exists.
+        let alive = unsafe { libc::kill(st.pid as i32, 0) } == 0;
+        let health = if age_s <= 1.0 {
+            "ok"
+        } else if alive && st.lifecycle != microrobot_messages::LifecycleState::Finalized as u32 {
+            "silent"
+        } else {
+            "gone"
+        };
         out.push(Row {
             service: role.name(),
             pid: st.pid,
@@ -97,15 +140,21 @@ fn rows(monitor: &StatusMonitor) -> Vec<Row> {
             motion_time_s: st.motion_time_s,
             cpu_time_ms: st.cpu_time_ms,
             rss_kib: st.rss_kib,
-            age_s: seen.at.elapsed().as_secs_f64(),
+            age_s,
+            health,
+            latency_is: match role {
+                ServiceRole::Planner => "wake-up lateness",
+                ServiceRole::Dynamics => "setpoint → torque",
+                ServiceRole::Actuator => "end-to-end latency",
+            },
         });
     }
     out
 }
 
-fn table(instance: &str, rows: &[Row]) -> String {
+fn table(instance: &str, rows: &[Row], arm: Option<&Arm>) -> String {
     let mut s = format!(
-        "microrobot top — instance `{instance}`\n{:<9} {:>7} {:<11} {:>9} {:>9} {:>9} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9} {:>11}\n",
+        "microrobot top — instance `{instance}`\n{:<9} {:>7} {:<11} {:>9} {:>9} {:>9} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9} {:>11}  timing measured\n",
         "service",
         "pid",
         "lifecycle",
@@ -125,13 +174,17 @@ fn table(instance: &str, rows: &[Row]) -> String {
             .cycles_per_s
             .map(|v| format!("{v:.0}"))
             .unwrap_or_else(|| "-".into());
-        let stale_mark = if r.age_s > 1.0 { " (silent)" } else { "" };
+        let mark = match r.health {
+            "silent" => format!(" SILENT {:.1} s (hung?)", r.age_s),
+            "gone" => format!(" gone ({:.1} s ago)", r.age_s),
+            _ => String::new(),
+        };
         let estop = r
             .estop_latency_us
             .map(|v| format!("{v:.1}"))
             .unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "{:<9} {:>7} {:<11} {:>9} {:>9.1} {:>9.1} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9.2} {:>11}{stale_mark}\n",
+            "{:<9} {:>7} {:<11} {:>9} {:>9.1} {:>9.1} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9.2} {:>11}  {}{mark}\n",
             r.service,
             r.pid,
             r.lifecycle,
@@ -145,12 +198,161 @@ fn table(instance: &str, rows: &[Row]) -> String {
             r.faults,
             r.motion_time_s,
             estop,
+            r.latency_is,
         ));
+    }
+    if let Some(a) = arm {
+        s.push_str(&format!(
+            "\narm: {} | program {} at {:.2} s\n",
+            a.activity, a.program, a.program_time_s
+        ));
+        s.push_str(&format!("{:<10} {:>12} {:>12}\n", "joint", "q", "torque"));
+        for (i, name) in a.joints.iter().enumerate() {
+            let q =
+                a.q.get(i)
+                    .map(|v| format!("{v:.3} {}", a.q_units.get(i).copied().unwrap_or("")))
+                    .unwrap_or_else(|| "-".into());
+            let t = a
+                .torque
+                .get(i)
+                .map(|v| format!("{v:.3}"))
+                .unwrap_or_else(|| "-".into());
+            s.push_str(&format!("{name:<10} {q:>12} {t:>12}\n"));
+        }
+        if let Some(p) = a.tool_pose {
+            s.push_str(&format!(
+                "tool: x {:.2} y {:.2} z {:.2} mm, q (w x y z) {:.4} {:.4} {:.4} {:.4}\n",
+                p[0] * 1e3,
+                p[1] * 1e3,
+                p[2] * 1e3,
+                p[3],
+                p[4],
+                p[5],
+                p[6]
+            ));
+        }
     }
     s
 }
 
-/// Shows the table until Ctrl-C (or once).
+/// The latest measured state and torque of an instance, and its robot (for joint names,
+/// units and the tool pose), read from the run's resolved config when there is one.
+struct ArmTap {
+    _node: Node<ipc::Service>,
+    state: Subscriber<ipc::Service, JointState, ()>,
+    torque: Subscriber<ipc::Service, TorqueCommand, ()>,
+    last_state: Option<JointState>,
+    last_torque: Option<TorqueCommand>,
+    robot: Option<(Robot, ModelData)>,
+}
+
+impl ArmTap {
+    fn open(instance: &str) -> anyhow::Result<Self> {
+        let node = microrobot_runtime::node::named_node(&format!(
+            "microrobot-top-arm.{instance}.{}",
+            std::process::id()
+        ))?;
+        let state = open_publish_subscribe::<JointState>(&node, instance, ServiceKind::State)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| anyhow::anyhow!("state subscriber: {e:?}"))?;
+        let torque = open_publish_subscribe::<TorqueCommand>(&node, instance, ServiceKind::Torque)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| anyhow::anyhow!("torque subscriber: {e:?}"))?;
+        let resolved = instance::state_dir()
+            .join(instance)
+            .join("pipeline.resolved.toml");
+        let robot = PipelineConfig::load(&resolved)
+            .ok()
+            .and_then(|cfg| Robot::from_file(&cfg.robot).ok())
+            .map(|r| {
+                let data = ModelData::new(&r);
+                (r, data)
+            });
+        Ok(Self {
+            _node: node,
+            state,
+            torque,
+            last_state: None,
+            last_torque: None,
+            robot,
+        })
+    }
+
+    fn poll(&mut self) {
+        while let Ok(Some(s)) = self.state.receive() {
+            self.last_state = Some(*s);
+        }
+        while let Ok(Some(t)) = self.torque.receive() {
+            self.last_torque = Some(*t);
+        }
+    }
+
+    fn arm(&mut self, planner: Option<&ServiceStatus>) -> Arm {
+        let mut a = Arm::default();
+        if let Some(p) = planner {
+            a.activity = Activity::from_wire(p.activity)
+                .map_or("unknown", Activity::name)
+                .to_string();
+            a.program = ProgramState::from_wire(p.program_state)
+                .map_or("unknown", ProgramState::name)
+                .to_string();
+            a.program_time_s = p.motion_time_s;
+        }
+        let dof = self
+            .last_state
+            .map_or(0, |s| (s.dof as usize).min(MAX_JOINTS));
+        for i in 0..dof {
+            let kind = self
+                .robot
+                .as_ref()
+                .and_then(|(r, _)| r.joints().get(i))
+                .map(|j| (j.name.clone(), j.kind));
+            let (name, kind) = kind.unwrap_or((format!("j{}", i + 1), JointKind::Revolute));
+            let q = self.last_state.map_or(0.0, |s| s.q[i]);
+            a.joints.push(name);
+            match kind {
+                JointKind::Revolute => {
+                    a.q.push(q.to_degrees());
+                    a.q_units.push("deg");
+                }
+                JointKind::Prismatic => {
+                    a.q.push(q * 1e3);
+                    a.q_units.push("mm");
+                }
+            }
+            if let Some(t) = self.last_torque {
+                a.torque.push(t.tau[i]);
+            }
+        }
+        if let (Some((robot, data)), Some(st)) = (self.robot.as_mut(), self.last_state)
+            && st.dof as usize == robot.dof()
+        {
+            let mut q = JointVector::zeros();
+            for i in 0..robot.dof() {
+                q[i] = st.q[i];
+            }
+            let iso = microrobot_model::tool_pose(robot, data, &q).to_isometry();
+            let (t, r) = (iso.translation.vector, iso.rotation);
+            a.tool_pose = Some([t.x, t.y, t.z, r.w, r.i, r.j, r.k]);
+        }
+        a
+    }
+}
+
+/// Whether the pipeline has ended: every service that reported has sent its final
+/// status, or none has reported for `silence`.
+fn ended(monitor: &StatusMonitor, silence: Duration) -> bool {
+    let seen: Vec<_> = monitor.latest.iter().flatten().collect();
+    !seen.is_empty()
+        && (seen
+            .iter()
+            .all(|s| s.status.lifecycle == microrobot_messages::LifecycleState::Finalized as u32)
+            || seen.iter().all(|s| s.at.elapsed() > silence))
+}
+
+/// Shows the view until Ctrl-C or the pipeline's end (or once).
 pub fn main(args: TopArgs) -> anyhow::Result<()> {
     ensure!(
         args.interval.is_finite() && args.interval >= 0.1,
@@ -162,7 +364,13 @@ pub fn main(args: TopArgs) -> anyhow::Result<()> {
         "--timeout {}: must be a positive number of seconds",
         args.timeout
     );
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    if instance::live_nodes(&args.instance).is_empty() {
+        anyhow::bail!(
+            "no pipeline instance `{}` is running (see `microrobot list`; start one with `microrobot run --instance {}`)",
+            args.instance,
+            args.instance
+        );
+    }
     let stop = Arc::new(AtomicBool::new(false));
     {
         let flag = stop.clone();
@@ -172,6 +380,7 @@ pub fn main(args: TopArgs) -> anyhow::Result<()> {
         &args.instance,
         &format!("microrobot-top.{}.{}", args.instance, std::process::id()),
     )?;
+    let mut arm = ArmTap::open(&args.instance)?;
     // First contact: something must report.
     let got = monitor.wait_for(Duration::from_secs_f64(args.timeout), |m| {
         m.latest.iter().any(Option::is_some)
@@ -189,19 +398,27 @@ pub fn main(args: TopArgs) -> anyhow::Result<()> {
         m.latest.iter().all(Option::is_some) && m.previous.iter().all(Option::is_some)
     })?;
     let clear = !args.json && !args.once && std::io::stdout().is_terminal();
+    let silence = Duration::from_secs_f64(args.timeout.max(3.0));
     loop {
         monitor.poll()?;
+        arm.poll();
         let rows = rows(&monitor);
+        let view = arm.arm(monitor.get(ServiceRole::Planner));
         if args.json {
-            let obj = serde_json::json!({ "instance": args.instance, "services": rows });
+            let obj =
+                serde_json::json!({ "instance": args.instance, "services": rows, "arm": view });
             println!("{obj}");
         } else {
             if clear {
                 print!("\x1b[H\x1b[2J");
             }
-            print!("{}", table(&args.instance, &rows));
+            print!("{}", table(&args.instance, &rows, Some(&view)));
         }
         if args.once || stop.load(Ordering::SeqCst) {
+            return Ok(());
+        }
+        if ended(&monitor, silence) {
+            println!("pipeline `{}` ended", args.instance);
             return Ok(());
         }
         let next = Instant::now() + Duration::from_secs_f64(args.interval);

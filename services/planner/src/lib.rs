@@ -33,10 +33,10 @@ pub mod teleop;
 
 use anyhow::Context as _;
 use microrobot_messages::{
-    CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState, MAX_JOINTS,
-    MasterPose, MotionCommand, ProfileKind, ProgramEnd, ProgramState, RefusalReason, ServiceKind,
-    ServiceRole, ServiceStatus, TargetSpace, monotonic_ns, open_event, open_publish_subscribe,
-    setpoint_flags, state_flags,
+    Activity, CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState,
+    MAX_JOINTS, MasterPose, MotionCommand, ProfileKind, ProgramEnd, ProgramState, RefusalReason,
+    ServiceKind, ServiceRole, ServiceStatus, TargetSpace, monotonic_ns, open_event,
+    open_publish_subscribe, setpoint_flags, state_flags,
 };
 use microrobot_model::ik::{IkOptions, IkTarget};
 use microrobot_model::{ModelData, Robot};
@@ -295,6 +295,22 @@ impl PlannerCore {
     /// Whether the program (if any) has finished or was abandoned, and the arm is at rest.
     pub fn program_done(&self) -> bool {
         self.program_done
+    }
+
+    /// What the planner is doing, as the status reports it.
+    pub fn activity(&self) -> Activity {
+        if !self.started {
+            return Activity::Starting;
+        }
+        match self.mode {
+            Mode::Hold => Activity::Hold,
+            Mode::Moving if self.program_running => Activity::Program,
+            Mode::Moving => Activity::Move,
+            Mode::Stopping => Activity::Stopping,
+            Mode::EStop => Activity::EStop,
+            Mode::SafeHold => Activity::SafeHold,
+            Mode::Teleop => Activity::Teleop,
+        }
     }
 
     /// Where the configured program stands: pending, running, finished, abandoned or
@@ -978,6 +994,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         let (state, end) = core.program_outcome();
         st.program_state = state as u32;
         st.program_end = end as u32;
+        st.activity = core.activity() as u32;
         st.latency = lat.summary();
     };
 
