@@ -97,7 +97,19 @@ fn kill_mid_motion(test: &str, victim: ServiceRole) -> Case {
     std::thread::sleep(Duration::from_millis(6000));
     proc.signal(libc::SIGINT);
     let out = proc.finish(60.0);
-    assert_eq!(out.code(), Some(0), "run; stderr:\n{}", out.stderr);
+    // The pipeline recovered and ran on, but a service died: the run's verdict says so.
+    assert_eq!(
+        out.code(),
+        Some(microrobot_runtime::exit_code::SERVICE_FAILED as i32),
+        "run; stderr:\n{}",
+        out.stderr
+    );
+    assert!(
+        out.stderr
+            .contains(&format!("the {} service died", victim.name())),
+        "the verdict names the death; stderr:\n{}",
+        out.stderr
+    );
     Case {
         streams: rec.finish(),
         summary: summary(&summary_path),

@@ -10,7 +10,7 @@ fn main() -> ExitCode {
         (Some("--config"), Some(p)) => PathBuf::from(p),
         _ => {
             eprintln!("usage: microrobot-actuator --config FILE");
-            return ExitCode::from(microrobot_runtime::exit_code::BAD_CONFIG);
+            return ExitCode::from(microrobot_runtime::exit_code::USAGE);
         }
     };
     microrobot_runtime::service_main(

@@ -4,7 +4,7 @@
 use std::process::Command;
 
 #[test]
-fn bad_config_exits_2_naming_the_key() {
+fn bad_config_exits_bad_config_naming_the_key() {
     let dir = std::env::temp_dir().join(format!("mr-act-bin-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let cfg = dir.join("pipeline.toml");
@@ -21,7 +21,10 @@ fn bad_config_exits_2_naming_the_key() {
         .env("RUST_LOG", "error")
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(
+        out.status.code(),
+        Some(microrobot_runtime::exit_code::BAD_CONFIG as i32)
+    );
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("pipeline.toml") && err.contains("watchdog.stale_ms"),
@@ -31,9 +34,12 @@ fn bad_config_exits_2_naming_the_key() {
 }
 
 #[test]
-fn missing_arguments_exit_2() {
+fn missing_arguments_exit_with_the_usage_code() {
     let out = Command::new(env!("CARGO_BIN_EXE_microrobot-actuator"))
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(
+        out.status.code(),
+        Some(microrobot_runtime::exit_code::USAGE as i32)
+    );
 }
