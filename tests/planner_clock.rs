@@ -65,7 +65,8 @@ fn a_paused_actuator_pauses_the_planner_and_the_timer_clock_does_not() {
             dir.path(),
             &inst,
             "",
-            &format!("[planner]\nclock = \"{clock}\""),
+            // The actuator is frozen on purpose: no hung-service kill during the pause.
+            &format!("[planner]\nclock = \"{clock}\"\n\n[supervisor]\nhung_ms = 60000.0"),
         );
         let rec = Recorder::start_statuses(&inst);
         let proc = start_holding(&inst, &cfg, 6, None);

@@ -96,12 +96,13 @@ fn a_program_target_outside_a_joint_range_is_refused_before_anything_starts() {
     assert!(ok.stdout.contains("check: ok"), "{}", ok.stdout);
 }
 
-/// Starts the Table 4 program (8.5 s), freezes `victim` with SIGSTOP for `freeze`
-/// 1 s into the motion, resumes it, and waits for the run's end.
+/// Starts the Table 4 program (8.5 s) with the config `tables`, freezes `victim` with
+/// SIGSTOP for `freeze` 1 s into the motion, resumes it, and waits for the run's end.
 fn freeze_mid_program(
     tag: &str,
     victim: ServiceRole,
     freeze: Duration,
+    tables: &str,
 ) -> (Finished, serde_json::Value) {
     let dir = tempfile::tempdir().expect("tempdir");
     let inst = instance(tag);
@@ -109,7 +110,7 @@ fn freeze_mid_program(
         dir.path(),
         &inst,
         &format!("program = \"{}\"", table4_program().display()),
-        "",
+        tables,
     );
     let sum = dir.path().join("summary.json");
     let proc = start(&["run", "--config", &s(&cfg), "--summary-json", &s(&sum)]);
@@ -125,12 +126,70 @@ fn freeze_mid_program(
     (out, summary(&sum))
 }
 
+/// The frozen service is not taken for hung (to see what the rest of the pipeline does).
+const NO_HUNG_KILL: &str = "[supervisor]\nhung_ms = 60000.0";
+
+#[test]
+fn a_hung_service_is_found_killed_and_named_in_the_verdict() {
+    // Frozen for good: the supervisor must find it hung and stop the pipeline
+    // (`on_failure = "stop_all"`), or restart it (`"restart"`).
+    for (tag, policy, restarted) in [
+        ("verdict-hung-stop", "stop_all", false),
+        ("verdict-hung-restart", "restart", true),
+    ] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let inst = instance(tag);
+        let cfg = write_config(
+            dir.path(),
+            &inst,
+            "",
+            &format!("[supervisor]\non_failure = \"{policy}\"\nhung_ms = 400.0"),
+        );
+        let sum = dir.path().join("summary.json");
+        let proc = start(&[
+            "run",
+            "--config",
+            &s(&cfg),
+            "--no-program",
+            "--duration",
+            "6",
+            "--summary-json",
+            &s(&sum),
+        ]);
+        wait_ready(&inst, 60.0);
+        let pid = pid_of(&inst, ServiceRole::Dynamics).expect("dynamics pid");
+        // SAFETY: kill(2) on a child of the pipeline this test started.
+        unsafe { libc::kill(pid, libc::SIGSTOP) };
+        let out = proc.finish(120.0);
+        assert!(!alive(pid), "{policy}: the hung process was killed");
+        assert_eq!(
+            out.code(),
+            Some(exit_code::SERVICE_FAILED as i32),
+            "{policy}: stderr:\n{}",
+            out.stderr
+        );
+        assert!(
+            out.stderr.contains("the dynamics service hung"),
+            "{policy}: stderr:\n{}",
+            out.stderr
+        );
+        let sum = summary(&sum);
+        assert_eq!(sum["exit_ok"], false, "{sum}");
+        assert_eq!(
+            sum["services"]["dynamics"]["restarts"],
+            u32::from(restarted),
+            "{policy}: {sum}"
+        );
+    }
+}
+
 #[test]
 fn a_program_abandoned_because_the_measured_state_went_stale_fails_the_run() {
     let (out, sum) = freeze_mid_program(
         "verdict-stale",
         ServiceRole::Actuator,
         Duration::from_millis(1000),
+        NO_HUNG_KILL,
     );
     assert_eq!(
         out.code(),
@@ -151,6 +210,7 @@ fn a_safe_state_latched_by_a_frozen_dynamics_fails_the_run() {
         "verdict-latch",
         ServiceRole::Dynamics,
         Duration::from_millis(2000),
+        NO_HUNG_KILL,
     );
     assert_eq!(
         out.code(),

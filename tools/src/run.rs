@@ -709,6 +709,9 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     // actuator's safe state latched (cleared again by a reset).
     let mut deaths: Vec<String> = Vec::new();
     let mut latched_at: Option<f64> = None;
+    // A service killed because it hung: what its death is reported as.
+    let mut hung: [Option<String>; 3] = [None, None, None];
+    let hung_after = Duration::from_secs_f64(cfg.supervisor.hung_ms / 1000.0);
 
     // Start in order, each after the previous one is ready.
     for role in ROLES {
@@ -822,6 +825,28 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
         }
         for role in ROLES {
             let i = slot(role);
+            // A live service whose status stopped is hung: kill it, and the death below
+            // applies the failure policy (reported as a hang).
+            if pipe.restarting[i].is_none()
+                && hung[i].is_none()
+                && let Some(seen) = &monitor.latest[i]
+                && seen.status.lifecycle != LifecycleState::Finalized as u32
+                && seen.at.elapsed() >= hung_after
+                && let Some(s) = pipe.service(role)
+                && s.poll_exit().is_none()
+            {
+                let silent_ms = seen.at.elapsed().as_secs_f64() * 1e3;
+                progress.note(&format!(
+                    "{} (pid {}) hung: no status for {silent_ms:.0} ms (supervisor.hung_ms = {}); killing it",
+                    role.name(),
+                    s.pid(),
+                    cfg.supervisor.hung_ms
+                ));
+                s.signal(libc::SIGKILL);
+                hung[i] = Some(format!(
+                    "hung (its process lived but sent no status for {silent_ms:.0} ms; killed)"
+                ));
+            }
             // A restarted service must report ready in time.
             if let Some(since) = pipe.restarting[i] {
                 if is_ready(&monitor, role) {
@@ -849,14 +874,16 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
                 .unwrap_or_default();
             let may_restart = cfg.supervisor.on_failure == FailurePolicy::Restart
                 && pipe.restarts[i] < cfg.supervisor.max_restarts;
+            let how = hung[i]
+                .take()
+                .unwrap_or_else(|| format!("died ({})", describe(st)));
             if !may_restart {
                 outcome = Some((
                     Stop::ServiceFailed,
                     exit_code::SERVICE_FAILED,
                     format!(
-                        "the {} service died ({}); stopping the pipeline (supervisor.on_failure = {}); its log {}:\n{}",
+                        "the {} service {how}; stopping the pipeline (supervisor.on_failure = {}); its log {}:\n{}",
                         role.name(),
-                        describe(st),
                         if cfg.supervisor.on_failure == FailurePolicy::Restart {
                             "restart, but max_restarts reached"
                         } else {
@@ -869,9 +896,8 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
                 break;
             }
             deaths.push(format!(
-                "the {} service died ({}) {:.1} s into the run and was restarted",
+                "the {} service {how} {:.1} s into the run and was restarted",
                 role.name(),
-                describe(st),
                 run_start.elapsed().as_secs_f64()
             ));
             pipe.carry(role, &monitor);
@@ -1058,6 +1084,20 @@ struct Judged<'a> {
 /// happen, with its exit code (one of [`exit_code`]). Empty: the job ran to its end.
 fn judge(j: &Judged<'_>) -> Vec<(u8, String)> {
     let mut out = Vec::new();
+    // A death first: it is the cause of what follows it.
+    if !j.faults_judged_elsewhere {
+        for d in j.deaths {
+            out.push((exit_code::SERVICE_FAILED, d.clone()));
+        }
+        if let Some(t) = j.latched_at_s {
+            out.push((
+                exit_code::JOB_FAILED,
+                format!(
+                    "the actuator's safe state latched {t:.1} s into the run and was not reset by the end"
+                ),
+            ));
+        }
+    }
     if j.program_given && j.stop != Stop::ServiceFailed && j.stop != Stop::Timeout {
         let p = j.planner.copied().unwrap_or_default();
         let state = ProgramState::from_wire(p.program_state).unwrap_or(ProgramState::None);
@@ -1103,19 +1143,6 @@ fn judge(j: &Judged<'_>) -> Vec<(u8, String)> {
                     state.name()
                 ),
             )),
-        }
-    }
-    if !j.faults_judged_elsewhere {
-        for d in j.deaths {
-            out.push((exit_code::SERVICE_FAILED, d.clone()));
-        }
-        if let Some(t) = j.latched_at_s {
-            out.push((
-                exit_code::JOB_FAILED,
-                format!(
-                    "the actuator's safe state latched {t:.1} s into the run and was not reset by the end"
-                ),
-            ));
         }
     }
     out

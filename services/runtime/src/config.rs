@@ -237,6 +237,9 @@ pub struct SupervisorConfig {
     pub on_failure: FailurePolicy,
     /// Restarts allowed per service with `on_failure = "restart"`.
     pub max_restarts: u32,
+    /// A live service whose status stops for this long is hung (ms): the supervisor
+    /// kills it and applies `on_failure` as to a dead one. At least two status periods.
+    pub hung_ms: f64,
 }
 
 /// The whole pipeline configuration, fully validated.
@@ -329,6 +332,7 @@ impl Default for PipelineConfig {
                 stop_timeout_ms: 3000.0,
                 on_failure: FailurePolicy::StopAll,
                 max_restarts: 3,
+                hung_ms: 500.0,
             },
             teleop: TeleopConfig::default(),
         }
@@ -504,6 +508,7 @@ impl PipelineConfig {
             })
         );
         let _ = writeln!(s, "max_restarts = {}", v.max_restarts);
+        let _ = writeln!(s, "hung_ms = {}", f(v.hung_ms));
         teleop::write_toml(&self.teleop, &mut s);
         s
     }
@@ -1127,6 +1132,7 @@ impl Reader<'_> {
                 "stop_timeout_ms",
                 "on_failure",
                 "max_restarts",
+                "hung_ms",
             ],
         )?;
         let dv = &d.supervisor;
@@ -1157,7 +1163,17 @@ impl Reader<'_> {
                 ],
             )?,
             max_restarts: self.u64_in(&t, "max_restarts", dv.max_restarts as u64, 0, 1000)? as u32,
+            hung_ms: self.f64_in(&t, "hung_ms", dv.hung_ms, 0.0, 600_000.0, true)?,
         };
+        if supervisor.hung_ms < 2.0 * status_period_ms {
+            return Err(self.err(
+                "supervisor.hung_ms",
+                format!(
+                    "{} must be >= 2 × status_period_ms ({status_period_ms}): a healthy service reports once per status period",
+                    supervisor.hung_ms
+                ),
+            ));
+        }
 
         Ok(PipelineConfig {
             instance,
