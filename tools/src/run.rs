@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use microrobot_messages::{
-    LifecycleState, ProgramEnd, ProgramState, ServiceRole, ServiceStatus, monotonic_ns,
+    Activity, LifecycleState, ProgramEnd, ProgramState, ServiceRole, ServiceStatus, monotonic_ns,
 };
 use microrobot_model::Robot;
 use microrobot_runtime::config::FailurePolicy;
@@ -481,6 +481,38 @@ pub struct Progress {
     bar: Option<indicatif::ProgressBar>,
     last_plain: Instant,
     quiet: bool,
+    /// Each role's problem counters at the start of the current interval.
+    window: Window,
+}
+
+/// Problem counters per role at one moment (misses, lost, refused, stale, faults).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Counts([[u64; 5]; 3]);
+
+impl Counts {
+    fn of(monitor: &StatusMonitor) -> Self {
+        let mut c = Counts::default();
+        for role in ROLES {
+            if let Some(st) = monitor.get(role) {
+                c.0[slot(role)] = [
+                    st.deadline_misses,
+                    st.lost_messages,
+                    st.refused_messages,
+                    st.stale_cycles,
+                    st.faults,
+                ];
+            }
+        }
+        c
+    }
+}
+
+/// The counters at the start of the interval the progress line reports on (the plain
+/// line's 3 s, or the last few seconds on a terminal).
+#[derive(Debug, Clone, Copy)]
+struct Window {
+    since: Instant,
+    base: Counts,
 }
 
 impl Progress {
@@ -494,6 +526,10 @@ impl Progress {
             bar,
             last_plain: Instant::now(),
             quiet,
+            window: Window {
+                since: Instant::now(),
+                base: Counts::default(),
+            },
         }
     }
 
@@ -511,13 +547,26 @@ impl Progress {
         if self.quiet {
             return;
         }
-        let line = progress_line(monitor, start) + extra;
+        let now = Counts::of(monitor);
+        let line = progress_line(monitor, start, &self.window, &now) + extra;
         match &self.bar {
-            Some(bar) => bar.set_message(line),
+            Some(bar) => {
+                bar.set_message(line);
+                if self.window.since.elapsed() >= Duration::from_secs(3) {
+                    self.window = Window {
+                        since: Instant::now(),
+                        base: now,
+                    };
+                }
+            }
             None => {
                 if self.last_plain.elapsed() >= Duration::from_secs(3) {
                     self.last_plain = Instant::now();
                     eprintln!("{line}");
+                    self.window = Window {
+                        since: Instant::now(),
+                        base: now,
+                    };
                 }
             }
         }
@@ -530,14 +579,18 @@ impl Progress {
     }
 }
 
-fn progress_line(monitor: &StatusMonitor, start: Instant) -> String {
+/// The progress line: program time, each service's rate with what went wrong in the
+/// current interval (`+N misses` …, or `FAULT`), the end-to-end p99, and the totals.
+fn progress_line(monitor: &StatusMonitor, start: Instant, window: &Window, now: &Counts) -> String {
     let mut s = format!("[{:6.1} s]", start.elapsed().as_secs_f64());
     if let Some(p) = monitor.get(ServiceRole::Planner) {
-        s.push_str(&format!(" program t={:.2} s", p.motion_time_s));
+        let activity = Activity::from_wire(p.activity).map_or("?", Activity::name);
+        s.push_str(&format!(" {activity} t={:.2} s", p.motion_time_s));
         if p.program_done == 1 {
             s.push_str(" (done)");
         }
     }
+    const NAMES: [&str; 5] = ["misses", "lost", "refused", "stale", "faults"];
     for role in [
         ServiceRole::Planner,
         ServiceRole::Dynamics,
@@ -549,13 +602,17 @@ fn progress_line(monitor: &StatusMonitor, start: Instant) -> String {
                     .rate(role)
                     .map(|r| format!("{r:.0}/s"))
                     .unwrap_or_else(|| "-".into());
-                let health = if st.lifecycle == LifecycleState::Fault as u32 {
-                    " FAULT"
-                } else if st.stale_cycles > 0 || st.lost_messages > 0 || st.deadline_misses > 0 {
-                    " !"
-                } else {
-                    ""
-                };
+                let i = slot(role);
+                let mut health = String::new();
+                if st.lifecycle == LifecycleState::Fault as u32 {
+                    health.push_str(" FAULT");
+                }
+                for (k, name) in NAMES.iter().enumerate() {
+                    let d = now.0[i][k].saturating_sub(window.base.0[i][k]);
+                    if d > 0 {
+                        health.push_str(&format!(" +{d} {name}"));
+                    }
+                }
                 s.push_str(&format!(" | {} {rate}{health}", role.name()));
             }
             None => s.push_str(&format!(" | {} -", role.name())),
@@ -575,7 +632,10 @@ fn progress_line(monitor: &StatusMonitor, start: Instant) -> String {
         .filter_map(|r| monitor.get(*r))
         .map(|s| s.lost_messages)
         .sum();
-    s.push_str(&format!(" | misses {misses} lost {lost}"));
+    s.push_str(&format!(
+        " | total misses {misses} lost {lost} (+N: in the last {:.0} s)",
+        window.since.elapsed().as_secs_f64().max(1.0)
+    ));
     s
 }
 
