@@ -77,9 +77,26 @@ fn source(inst: &str, args: &[&str]) -> Proc {
     start(&all)
 }
 
+/// The report's JSON; its exit code must match its own verdict (0 exactly on a pass,
+/// JOB_FAILED on a failed check).
 fn json_of(out: &Finished) -> serde_json::Value {
-    assert_eq!(out.code(), Some(0), "{}", out.stderr);
-    serde_json::from_str(out.stdout.trim()).expect("report JSON")
+    let v: serde_json::Value = serde_json::from_str(out.stdout.trim()).expect("report JSON");
+    let pass = v["verdict"]["pass"].as_bool().expect("verdict.pass");
+    let want = if pass {
+        0
+    } else {
+        microrobot_runtime::exit_code::JOB_FAILED as i32
+    };
+    assert_eq!(out.code(), Some(want), "{}\n{v}", out.stderr);
+    v
+}
+
+/// Whether the report's verdict judged check `name` (Some(pass)) or not (None).
+fn check(report: &serde_json::Value, name: &str) -> Option<bool> {
+    report["verdict"]["checks"]
+        .as_array()
+        .and_then(|c| c.iter().find(|c| c["name"] == name))
+        .and_then(|c| c["pass"].as_bool())
 }
 
 #[test]
@@ -125,6 +142,9 @@ fn tremor_is_filtered_and_hand_motion_scaled_through_the_pipeline() {
     let lag = r["voluntary"]["phase_lag_deg"].as_f64().expect("lag");
     assert!(lag > 0.0 && lag < 90.0, "phase lag at 1 Hz {lag:.1} deg");
     assert!(r["latency_us"]["count"].as_u64().expect("count") > 1000);
+    // The report's own verdict agrees with the figures checked above.
+    assert_eq!(check(&r, "tremor attenuation"), Some(true), "{r}");
+    assert_eq!(check(&r, "voluntary gain"), Some(true), "{r}");
 
     // Ramp 3 mm / −1.5 mm / 1.5 mm and hold, with tremor: hand / 3 within 1 %.
     let rep = report(
@@ -166,6 +186,7 @@ fn tremor_is_filtered_and_hand_motion_scaled_through_the_pipeline() {
         "hand/ratio {moved} mm, want {want} mm"
     );
     assert!(err <= 1.0, "scaled displacement error {err:.2} %");
+    assert_eq!(check(&r, "final displacement error"), Some(true), "{r}");
 
     pipeline.signal(libc::SIGINT);
     let out = pipeline.finish(60.0);

@@ -52,6 +52,90 @@ pub struct TeleopReportArgs {
     /// JSON output.
     #[arg(long)]
     pub json: bool,
+    /// Verdict: the tremor must be attenuated by at least this much (dB).
+    #[arg(long, default_value_t = 20.0, value_name = "DB")]
+    pub min_tremor_attenuation_db: f64,
+    /// Verdict: |voluntary gain| at most this much (dB).
+    #[arg(long, default_value_t = 1.0, value_name = "DB")]
+    pub max_voluntary_gain_db: f64,
+    /// Verdict: the final displacement error at most this much (%).
+    #[arg(long, default_value_t = 5.0, value_name = "PCT")]
+    pub max_displacement_error_pct: f64,
+    /// Verdict: master sample → setpoint latency p99 at most this much (µs; not judged
+    /// unless given).
+    #[arg(long, value_name = "US")]
+    pub max_latency_p99_us: Option<f64>,
+}
+
+/// Below this amplitude (mm, scaled hand) a motion component is taken as absent and
+/// not judged: its gain would be the ratio of two noises.
+const PRESENT_MM: f64 = 0.01;
+
+/// One line of the verdict: what was measured against which threshold.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Check {
+    pub name: &'static str,
+    pub measured: String,
+    pub threshold: String,
+    /// `None`: not judged (the motion component was absent, or no threshold given).
+    pub pass: Option<bool>,
+}
+
+/// The report's verdict: every check that could be judged passed.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Verdict {
+    pub pass: bool,
+    pub checks: Vec<Check>,
+}
+
+/// Judges `r` against the thresholds of `args`.
+pub fn verdict(r: &TeleopReport, args: &TeleopReportArgs) -> Verdict {
+    let mut checks = Vec::new();
+    let tremor_present = r.tremor.hand_scaled_amplitude_mm >= PRESENT_MM;
+    checks.push(Check {
+        name: "tremor attenuation",
+        measured: format!(
+            "{:.1} dB at {:.2} Hz",
+            r.tremor_attenuation_db, r.tremor.frequency_hz
+        ),
+        threshold: format!(">= {:.1} dB", args.min_tremor_attenuation_db),
+        pass: tremor_present.then_some(r.tremor_attenuation_db >= args.min_tremor_attenuation_db),
+    });
+    // A sine is the hand's motion if it is not a small projection of a displacement
+    // (a ramp and hold fits a 1 Hz sine of a few % of its size).
+    let voluntary_present = r.voluntary.hand_scaled_amplitude_mm >= PRESENT_MM
+        && r.voluntary.hand_scaled_amplitude_mm >= 0.25 * r.final_hand_scaled_displacement_mm.abs();
+    checks.push(Check {
+        name: "voluntary gain",
+        measured: format!(
+            "{:+.2} dB at {:.2} Hz",
+            r.voluntary.gain_db, r.voluntary.frequency_hz
+        ),
+        threshold: format!("|gain| <= {:.2} dB", args.max_voluntary_gain_db),
+        pass: voluntary_present.then_some(r.voluntary.gain_db.abs() <= args.max_voluntary_gain_db),
+    });
+    // A hold after a displacement: judged when the hand moved and then stayed (no
+    // voluntary sine, whose final phase makes the end point arbitrary).
+    let displaced = r.final_hand_scaled_displacement_mm.abs() >= PRESENT_MM && !voluntary_present;
+    checks.push(Check {
+        name: "final displacement error",
+        measured: format!("{:.2} %", r.final_displacement_error_pct),
+        threshold: format!("<= {:.1} %", args.max_displacement_error_pct),
+        pass: displaced
+            .then_some(r.final_displacement_error_pct <= args.max_displacement_error_pct),
+    });
+    checks.push(Check {
+        name: "latency p99",
+        measured: format!("{:.0} µs", r.latency_us.p99),
+        threshold: args
+            .max_latency_p99_us
+            .map_or("not set".into(), |t| format!("<= {t:.0} µs")),
+        pass: args.max_latency_p99_us.map(|t| r.latency_us.p99 <= t),
+    });
+    Verdict {
+        pass: checks.iter().all(|c| c.pass != Some(false)),
+        checks,
+    }
 }
 
 /// Percentiles of a set of values.
@@ -424,8 +508,13 @@ pub fn main(args: TeleopReportArgs) -> anyhow::Result<()> {
         (args.voluntary_hz, args.tremor_hz),
     )
     .context("teleop report")?;
+    let v = verdict(&r, &args);
     if args.json {
-        println!("{}", serde_json::to_string(&r)?);
+        let mut obj = serde_json::to_value(&r)?;
+        if let Some(m) = obj.as_object_mut() {
+            m.insert("verdict".into(), serde_json::to_value(&v)?);
+        }
+        println!("{obj}");
     } else {
         println!(
             "teleop report of `{inst}` ({:.1} s analysed, {} master samples, {} setpoints)",
@@ -461,7 +550,53 @@ pub fn main(args: TeleopReportArgs) -> anyhow::Result<()> {
             "  tool tracking error of the arm: p50 {:.2} um, p99 {:.2} um, max {:.2} um",
             r.tracking_error_um.p50, r.tracking_error_um.p99, r.tracking_error_um.max
         );
-        println!("  flags: {:?}", r.flag_counts);
+        let f = &r.flag_counts;
+        let named = [
+            ("teleop", f.teleop),
+            ("clutch open", f.clutch_open),
+            ("master stale", f.master_stale),
+            ("workspace edge", f.workspace_edge),
+            ("singularity", f.singularity),
+            ("configuration flip refused", f.flip_refused),
+            ("input refused", f.input_refused),
+            ("limited", f.limited),
+        ];
+        println!(
+            "  setpoint flags (setpoints carrying each flag, % of the {} setpoints seen):",
+            r.setpoints
+        );
+        for (name, n) in named {
+            if n > 0 {
+                println!(
+                    "    {name:<27} {n:>7}  {:5.1} %",
+                    100.0 * n as f64 / r.setpoints.max(1) as f64
+                );
+            }
+        }
+    }
+    if !args.json {
+        println!("  verdict:");
+        for c in &v.checks {
+            println!(
+                "    {:<26} {:<22} {:<20} {}",
+                c.name,
+                c.measured,
+                c.threshold,
+                match c.pass {
+                    Some(true) => "pass",
+                    Some(false) => "FAIL",
+                    None => "not judged",
+                }
+            );
+        }
+        println!("  result: {}", if v.pass { "PASS" } else { "FAIL" });
+    }
+    if !v.pass {
+        return Err(crate::exit::with_code(
+            microrobot_runtime::exit_code::JOB_FAILED,
+        )(anyhow::anyhow!(
+            "teleop report: a check failed (see the verdict)"
+        )));
     }
     Ok(())
 }

@@ -533,7 +533,12 @@ impl Hooks for Soak {
         });
         let eta = self.t0.map_or(String::new(), |t0| {
             let left = (self.args.duration - t0.elapsed().as_secs_f64()).max(0.0) as u64;
-            format!(", ETA {}:{:02}:{:02}", left / 3600, left / 60 % 60, left % 60)
+            format!(
+                ", ETA {}:{:02}:{:02}",
+                left / 3600,
+                left / 60 % 60,
+                left % 60
+            )
         });
         format!(
             " | soak: kills {}, jumps {jumps}, latches {latches}{eta}",
