@@ -66,7 +66,11 @@ fn bad_command_line_override_is_refused_like_a_config_key() {
         "stderr:\n{}",
         out.stderr
     );
-    assert!(out.stderr.contains("rate_hz"), "{}", out.stderr);
+    assert!(
+        out.stderr.contains("--rate-hz: NaN"),
+        "names the flag as typed: {}",
+        out.stderr
+    );
 }
 
 #[test]
@@ -101,7 +105,12 @@ fn send_refuses_a_target_outside_the_joint_limits_locally() {
         30.0,
     );
     assert_ne!(out.code(), Some(0));
-    assert!(out.stderr.contains("outside its limits"), "{}", out.stderr);
+    assert!(
+        out.stderr
+            .contains("j6 target 400° is outside its range [-180°, 180°]"),
+        "in the units typed: {}",
+        out.stderr
+    );
 }
 
 #[test]

@@ -119,11 +119,22 @@ pub fn main(args: CheckArgs) -> ExitCode {
     }
 }
 
+/// `x` with at most 6 decimals and no trailing zeros (`120`, `-90`, `0.5`, `2.094395`).
+pub fn trim_number(x: f64) -> String {
+    let s = format!("{x:.6}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".to_string()
+    } else {
+        s.to_string()
+    }
+}
+
 /// A joint value in the unit a user writes it in: degrees (revolute) or mm (prismatic).
 fn user_value(kind: JointKind, si: f64) -> String {
     match kind {
-        JointKind::Revolute => format!("{:.3}°", si.to_degrees()),
-        JointKind::Prismatic => format!("{:.3} mm", si * 1e3),
+        JointKind::Revolute => format!("{}°", trim_number(si.to_degrees())),
+        JointKind::Prismatic => format!("{} mm", trim_number(si * 1e3)),
     }
 }
 
@@ -138,7 +149,7 @@ fn user_rate(kind: JointKind, si: f64, order: i32) -> String {
         2 => "/s²",
         _ => "/s³",
     };
-    format!("{v:.3}{unit}{per}")
+    format!("{}{unit}{per}", trim_number(v))
 }
 
 /// Every check of `microrobot check` on a resolved config.

@@ -36,7 +36,7 @@ pub enum Method {
 /// Runs the interface on stdin/stdout for the robot file at `robot_path`.
 pub fn run(robot_path: &Path, method: Method) -> anyhow::Result<()> {
     let robot = Robot::from_file(robot_path)
-        .with_context(|| format!("loading {}", robot_path.display()))
+        .map_err(|e| anyhow::anyhow!("--robot: {e}"))
         .map_err(with_code(exit_code::BAD_CONFIG))?;
     let stdin = std::io::stdin();
     let stdout = std::io::stdout();

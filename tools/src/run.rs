@@ -314,6 +314,14 @@ pub fn resolve_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
         cfg.duration_s = Some(d);
         overridden = true;
     }
+    for (flag, v) in [
+        ("--rate-hz", args.rate_hz),
+        ("--mass-scale", args.mass_scale),
+    ] {
+        if let Some(v) = v {
+            anyhow::ensure!(v.is_finite(), "{flag}: {v} is not a finite number");
+        }
+    }
     if let Some(r) = args.rate_hz {
         cfg.rate_hz = r;
         overridden = true;

@@ -185,15 +185,23 @@ pub fn build_command(args: &SendArgs, robot: Option<&Robot>) -> anyhow::Result<M
                     }
                 }
                 if let Some(robot) = robot {
-                    for (j, (v, joint)) in q.iter().zip(robot.joints()).enumerate() {
+                    for (v, joint) in q.iter().zip(robot.joints()) {
                         let l = &joint.limits;
+                        // Back in the units the user typed: deg or mm with --deg, else SI.
+                        let (scale, unit) = match (m.deg, joint.kind) {
+                            (true, JointKind::Revolute) => (180.0 / std::f64::consts::PI, "°"),
+                            (true, JointKind::Prismatic) => (1000.0, " mm"),
+                            (false, JointKind::Revolute) => (1.0, " rad"),
+                            (false, JointKind::Prismatic) => (1.0, " m"),
+                        };
+                        let u = |x: f64| format!("{}{unit}", crate::check::trim_number(x * scale));
                         ensure!(
                             l.contains(*v),
-                            "--joints: joint {} (`{}`) target {v:.6} is outside its limits [{:.6}, {:.6}] (SI units)",
-                            j + 1,
+                            "--joints: {} target {} is outside its range [{}, {}]",
                             joint.name,
-                            l.min,
-                            l.max
+                            u(*v),
+                            u(l.min),
+                            u(l.max)
                         );
                     }
                 }
