@@ -154,3 +154,15 @@ fn a_printing_command_ends_quietly_when_its_reader_closes() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_eq!(String::from_utf8_lossy(&out.stdout).lines().count(), 1);
 }
+
+#[test]
+fn shell_completions_cover_every_command() {
+    let out = run(&["completions", "bash"], 60.0);
+    assert_eq!(out.code(), Some(0), "{}", out.stderr);
+    for cmd in ["run", "check", "send", "list", "echo", "hz", "logs", "top", "soak"] {
+        assert!(
+            out.stdout.contains(&format!("microrobot__{cmd}")),
+            "`{cmd}` completes"
+        );
+    }
+}

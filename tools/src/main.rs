@@ -70,11 +70,52 @@ enum Command {
     /// Run one pipeline service in this process (used by `microrobot run`).
     #[command(hide = true)]
     Service(service::ServiceArgs),
+    /// Print a shell completion script (e.g. `microrobot completions bash >
+    /// ~/.local/share/bash-completion/completions/microrobot`).
+    Completions {
+        /// The shell.
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
 }
+
+/// The input and output of `eval model`, shown by `--help`.
+const EVAL_MODEL_SCHEMA: &str = "\
+Input: one JSON object per line on stdin, SI units (rad, or m for prismatic joints):
+  {\"q\": [q1, ..., qn], \"qd\": [...], \"qdd\": [...]}        (n = the robot's joint count)
+Output: one JSON object per input line, in order, flushed per line:
+  {\"fk\": 4x4 tool pose (row-major, m), \"tool_pose\": [x, y, z, qw, qx, qy, qz],
+   \"jacobian\": 6 x n (rows vx vy vz wx wy wz), \"mass_matrix\": n x n,
+   \"gravity_torque\": [n], \"coriolis_torque\": [n], \"tau\": [n]}
+A bad line gets {\"error\": \"line N: ...\"} and the rest go on; the exit code is then 7.
+Example:
+  echo '{\"q\":[0,0,0,0,0,0],\"qd\":[0,0,0,0,0,0],\"qdd\":[0,0,0,0,0,0]}' | \\
+    microrobot eval model --robot config/robots/seed-arm.toml";
+
+/// The input and output of `eval trajectory`, shown by `--help`.
+const EVAL_TRAJECTORY_SCHEMA: &str = "\
+Input: one JSON object per line on stdin, one problem each, SI units:
+  {\"profile\": \"cubic\" | \"quintic\" | \"lspb\" | \"soft\",
+   \"q0\", \"q1\"                 start and target position (required)
+   \"duration\"                 s; required for cubic, quintic, lspb; soft: minimum (0: time-optimal)
+   \"v0\", \"v1\", \"a0\", \"a1\"     boundary velocities and accelerations (default 0)
+   \"cruise_velocity\"          lspb only
+   \"vmax\", \"amax\", \"jmax\"     limits (required for soft)
+   \"times\": [t, ...]          sample times (s)
+   \"id\"                       echoed back}
+  A per-joint field may be a number or an array; with arrays the line is one synchronised
+  multi-joint problem and the samples come back indexed [time][joint].
+Output: one JSON object per input line, in order:
+  {\"duration\", \"q\", \"qd\", \"qdd\", \"jerk\"} at the given times, or {\"error\": \"...\"} naming
+  the field; the rest go on; the exit code is then 7.
+Example:
+  echo '{\"profile\":\"soft\",\"q0\":0,\"q1\":1,\"vmax\":1,\"amax\":2,\"jmax\":4,\"times\":[0,0.5,1]}' | \\
+    microrobot eval trajectory";
 
 #[derive(Subcommand)]
 enum EvalCommand {
     /// Kinematics and dynamics of a robot file for each `{"q","qd","qdd"}` line.
+    #[command(after_long_help = EVAL_MODEL_SCHEMA)]
     Model {
         /// Robot description (TOML), e.g. config/robots/seed-arm.toml.
         #[arg(long)]
@@ -84,6 +125,7 @@ enum EvalCommand {
         method: eval_model::Method,
     },
     /// Sample one trajectory problem per line (cubic, quintic, lspb, soft).
+    #[command(after_long_help = EVAL_TRAJECTORY_SCHEMA)]
     Trajectory,
 }
 
@@ -122,6 +164,11 @@ fn main() -> ExitCode {
         Command::Service(args) => return service::main(args),
         Command::Eval(EvalCommand::Model { robot, method }) => eval_model::run(&robot, method),
         Command::Eval(EvalCommand::Trajectory) => eval_trajectory::run(),
+        Command::Completions { shell } => {
+            let mut cmd = <Cli as clap::CommandFactory>::command();
+            clap_complete::generate(shell, &mut cmd, "microrobot", &mut std::io::stdout());
+            Ok(())
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
