@@ -159,9 +159,11 @@ fn a_printing_command_ends_quietly_when_its_reader_closes() {
 fn shell_completions_cover_every_command() {
     let out = run(&["completions", "bash"], 60.0);
     assert_eq!(out.code(), Some(0), "{}", out.stderr);
-    for cmd in ["run", "check", "send", "list", "echo", "hz", "logs", "top", "soak"] {
+    for cmd in [
+        "run", "check", "send", "list", "echo", "hz", "logs", "top", "soak",
+    ] {
         assert!(
-            out.stdout.contains(&format!("microrobot__{cmd}")),
+            out.stdout.contains(&format!("microrobot__subcmd__{cmd}")),
             "`{cmd}` completes"
         );
     }
