@@ -241,7 +241,7 @@ fn example_driver_in_place_of_the_actuator_runs_table4_to_the_end() {
 }
 
 /// `--floor-probe`: a bare timer loop with the same settings runs alongside and the
-/// summary reports it next to the planner (issue 4's "against the floor in the same
+/// summary reports it next to the planner ("against the floor in the same
 /// run"), with each service's CPU share. Without the flag there is no floor.
 #[test]
 fn free_running_run_reports_the_timer_floor_and_cpu_shares() {

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# CI step (issue 7): a Python master device, written only from messages/README.md and
+# CI step: a Python master device, written only from messages/README.md and
 # using the official iceoryx2 0.10.0 bindings, drives the arm of a real pipeline.
 #
 # Starts `microrobot run` in teleop mode (seed arm, ratio 3:1), publishes a 0.5 Hz hand

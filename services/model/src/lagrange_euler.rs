@@ -1,4 +1,4 @@
-//! The seed's Lagrange-Euler formulation (eqs. 18–20) as corrected in DESIGN.md,
+//! The seed's Lagrange-Euler formulation (eqs. 18–20) as corrected in docs/seed-arm.md,
 //! written literally with 4×4 homogeneous matrices: the independent reference
 //! that the tests hold the Newton-Euler fast path against. Slow by design:
 //! every `U_pj` and `U_pjk` is a product of 4×4 matrices and every `D` a trace

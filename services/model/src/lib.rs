@@ -6,7 +6,7 @@
 //! shared; a [`ModelData`] is preallocated scratch owned by one caller, and every
 //! algorithm takes `(&Robot, &mut ModelData, ...)`.
 //!
-//! Conventions (DESIGN.md): standard Denavit-Hartenberg frames
+//! Conventions (docs/seed-arm.md): standard Denavit-Hartenberg frames
 //! `T = Rz(theta) Tz(d) Tx(a) Rx(alpha)` (seed eq. 1), joint variable added to
 //! `theta` (revolute) or `d` (prismatic); SI units everywhere inside; vectors are
 //! [`JointVector`]s of length [`MAX_JOINTS`] whose entries at and beyond

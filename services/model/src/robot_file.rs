@@ -1,4 +1,4 @@
-//! Robot description files (DESIGN.md "Robot description"): TOML text to
+//! Robot description files (docs/seed-arm.md, "Robot description"): TOML text to
 //! [`Robot`], every key checked, units converted once (mm → m, deg → rad,
 //! kg·mm² → kg·m²). Errors name the file and the full key path.
 
@@ -99,7 +99,7 @@ const KGMM2: f64 = 1.0e-6;
 const DEG: f64 = std::f64::consts::PI / 180.0;
 
 impl Robot {
-    /// Parses a robot description (DESIGN.md format). `origin` is the file name
+    /// Parses a robot description (the format of docs/seed-arm.md). `origin` is the file name
     /// used in error messages.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Robot, RobotFileError> {
         let table: Table = text

@@ -1,5 +1,5 @@
 //! Every class of bad robot file is refused with an error naming the file and
-//! the key (DESIGN.md "Robot description", issue 2 item 1).
+//! the key (docs/seed-arm.md, "Robot description").
 #![allow(clippy::needless_range_loop)] // index loops read like the matrix formulas
 
 use microrobot_model::{Robot, RobotFileError};

@@ -124,7 +124,7 @@ pub enum Profile {
         duration: f64,
     },
     /// Fifth-order polynomial through start/target positions, velocities and
-    /// accelerations over `duration` (seed eq. 23–24 with the DESIGN.md errata).
+    /// accelerations over `duration` (seed eq. 23–24 with the errata of docs/seed-arm.md).
     Quintic {
         /// Duration (s), > 0.
         duration: f64,

@@ -13,7 +13,7 @@ pub fn cubic_coefficients(q0: f64, q1: f64, v0: f64, v1: f64, t: f64) -> [f64; 4
 }
 
 /// Coefficients c0..c5 of the quintic with boundary positions, velocities and
-/// accelerations (seed eq. 23–24 with the DESIGN.md errata: C4 contains 30(θi − θf)
+/// accelerations (seed eq. 23–24 with the errata of docs/seed-arm.md: C4 contains 30(θi − θf)
 /// and C5 −(θ̈i − θ̈f)tf²).
 #[allow(clippy::too_many_arguments)]
 pub fn quintic_coefficients(

@@ -77,7 +77,7 @@ fn v3(v: &[f64; 3]) -> String {
     format!("[{:?}, {:?}, {:?}]", v[0], v[1], v[2])
 }
 
-/// The spec as a robot file in DESIGN.md's format.
+/// The spec as a robot file in the format of docs/seed-arm.md.
 pub fn to_toml(spec: &RobotSpec) -> String {
     let mut s = format!(
         "[robot]\nname = \"random\"\ngravity_mps2 = {}\n",

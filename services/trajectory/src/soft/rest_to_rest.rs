@@ -1,4 +1,4 @@
-//! Rest-to-rest soft motion in closed form (seed section 3.2.4, with the DESIGN.md
+//! Rest-to-rest soft motion in closed form (seed section 3.2.4, with the docs/seed-arm.md
 //! errata): total time 4Tj + 2Ta + Tv.
 //!
 //! Seed case 1 (D ≥ Dthr1): vmax and amax reached, cruise Tv > 0. Case 2
