@@ -1296,3 +1296,107 @@ fn stop_recorder(recorder: &mut Service, grace: Duration) -> bool {
         std::thread::sleep(Duration::from_millis(10));
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn planner(state: ProgramState, end: ProgramEnd) -> ServiceStatus {
+        ServiceStatus {
+            role: ServiceRole::Planner as u32,
+            program_state: state as u32,
+            program_end: end as u32,
+            motion_time_s: 1.5,
+            ..Default::default()
+        }
+    }
+
+    fn judged(
+        stop: Stop,
+        program: Option<ServiceStatus>,
+        deaths: &[String],
+        latched_at_s: Option<f64>,
+        elsewhere: bool,
+    ) -> Vec<u8> {
+        judge(&Judged {
+            stop,
+            program_given: program.is_some(),
+            planner: program.as_ref(),
+            deaths,
+            latched_at_s,
+            faults_judged_elsewhere: elsewhere,
+            planner_log: Path::new("/nonexistent/planner.log"),
+        })
+        .into_iter()
+        .map(|(code, why)| {
+            assert!(!why.is_empty());
+            code
+        })
+        .collect()
+    }
+
+    #[test]
+    fn a_finished_program_or_a_plain_hold_passes() {
+        let done = planner(ProgramState::Finished, ProgramEnd::None);
+        assert!(judged(Stop::ProgramDone, Some(done), &[], None, false).is_empty());
+        assert!(judged(Stop::Duration, None, &[], None, false).is_empty());
+        assert!(judged(Stop::Interrupted, None, &[], None, false).is_empty());
+    }
+
+    #[test]
+    fn a_program_that_did_not_run_to_its_end_fails() {
+        let abandoned = planner(ProgramState::Abandoned, ProgramEnd::StaleState);
+        let not_run = planner(ProgramState::NotRun, ProgramEnd::CannotPlan);
+        let running = planner(ProgramState::Running, ProgramEnd::None);
+        let code = exit_code::JOB_FAILED;
+        assert_eq!(
+            judged(Stop::ProgramDone, Some(abandoned), &[], None, false),
+            [code]
+        );
+        assert_eq!(
+            judged(Stop::ProgramDone, Some(not_run), &[], None, false),
+            [code]
+        );
+        // `--duration` bounds the job; Ctrl-C cuts it short.
+        assert!(judged(Stop::Duration, Some(running), &[], None, false).is_empty());
+        assert_eq!(
+            judged(Stop::Interrupted, Some(running), &[], None, false),
+            [exit_code::INTERRUPTED]
+        );
+    }
+
+    #[test]
+    fn deaths_and_latches_fail_the_run_unless_judged_elsewhere() {
+        let death = ["the dynamics service died (killed by signal 9)".to_string()];
+        let abandoned = planner(ProgramState::Abandoned, ProgramEnd::SafeState);
+        assert_eq!(
+            judged(Stop::ProgramDone, Some(abandoned), &death, Some(2.0), false),
+            [
+                exit_code::SERVICE_FAILED,
+                exit_code::JOB_FAILED,
+                exit_code::JOB_FAILED
+            ],
+            "the death first, then the latch, then the program"
+        );
+        assert!(judged(Stop::Duration, None, &death, Some(2.0), true).is_empty());
+    }
+
+    #[test]
+    fn a_program_is_over_when_done_or_ended_under_a_latched_actuator() {
+        let mut p = planner(ProgramState::Abandoned, ProgramEnd::SafeState);
+        let latched = ServiceStatus {
+            lifecycle: LifecycleState::Fault as u32,
+            ..Default::default()
+        };
+        let active = ServiceStatus {
+            lifecycle: LifecycleState::Active as u32,
+            ..Default::default()
+        };
+        assert!(program_over(&p, Some(&latched)));
+        assert!(!program_over(&p, Some(&active)), "still braking");
+        p.program_done = 1;
+        assert!(program_over(&p, Some(&active)));
+        let running = planner(ProgramState::Running, ProgramEnd::None);
+        assert!(!program_over(&running, Some(&latched)));
+    }
+}
