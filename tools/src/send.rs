@@ -20,15 +20,16 @@ use crate::supervisor::monitor::StatusMonitor;
 /// Options of `microrobot send`.
 #[derive(Debug, clap::Args)]
 pub struct SendArgs {
-    /// Instance name of the running pipeline.
-    #[arg(long, default_value = "default", value_name = "NAME")]
+    /// Instance name of the running pipeline (before or after the command).
+    #[arg(long, global = true, default_value = "default", value_name = "NAME")]
     pub instance: String,
-    /// Pipeline config whose robot is used to check targets before sending (skipped
-    /// when the file does not exist).
-    #[arg(long, default_value_os_t = crate::config_path::default_config(), value_name = "FILE")]
+    /// Pipeline config whose robot checks targets before sending when the instance's
+    /// own resolved config cannot be read (a running instance's robot is always the one
+    /// it runs); skipped when neither exists.
+    #[arg(long, global = true, default_value_os_t = crate::config_path::default_config(), value_name = "FILE")]
     pub config: PathBuf,
-    /// How long to wait for the planner (connection and verdict), in s.
-    #[arg(long, default_value_t = 10.0, value_name = "DURATION", value_parser = crate::duration::parse)]
+    /// How long to wait for the planner (connection and verdict).
+    #[arg(long, global = true, default_value_t = 10.0, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub timeout: f64,
     #[command(subcommand)]
     pub command: SendCommand,
@@ -243,8 +244,18 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
         "--timeout {}: must be a positive number of seconds",
         args.timeout
     );
-    let robot = robot_of(&args.config)
-        .with_context(|| format!("cannot check the target against {}", args.config.display()))?;
+    // The robot the running instance runs, from the config its supervisor resolved.
+    let resolved = crate::supervisor::instance::state_dir()
+        .join(&args.instance)
+        .join("pipeline.resolved.toml");
+    let running = !crate::supervisor::instance::live_nodes(&args.instance).is_empty();
+    let config = if running && resolved.exists() {
+        resolved
+    } else {
+        args.config.clone()
+    };
+    let robot = robot_of(&config)
+        .with_context(|| format!("cannot check the target against {}", config.display()))?;
     let mut cmd = build_command(&args, robot.as_ref())?;
     iceoryx2::prelude::set_log_level_from_env_or(LogLevel::Error);
 
