@@ -132,7 +132,9 @@ impl RefusalReason {
             Self::BadDuration => "impossible duration",
             Self::BadLimitScale => "limit scale outside (0, 1]",
             Self::Stale => "stale timestamp (too old, or from the future)",
-            Self::EStopActive => "motion is refused during an e-stop; send reset first",
+            Self::EStopActive => {
+                "motion is refused during an e-stop; send reset first (a reset sent while braking takes effect at rest)"
+            }
             Self::SafeStateActive => {
                 "motion is refused while the actuator is in its safe state; send reset first"
             }

@@ -15,8 +15,9 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::*;
 use microrobot_messages::{
-    JointSetpoint, JointState, ServiceKind, ServiceRole, ServiceStatus, TorqueCommand,
-    open_publish_subscribe, service_name,
+    CommandKind, JointSetpoint, JointState, MotionCommand, ProfileKind, ServiceKind, ServiceRole,
+    ServiceStatus, TargetSpace, TorqueCommand, monotonic_ns, open_event, open_publish_subscribe,
+    service_name,
 };
 
 /// The `microrobot` binary under test.
@@ -464,4 +465,97 @@ pub fn start_holding(instance: &str, cfg: &Path, duration_s: u32, summary: Optio
     let proc = start(&args);
     wait_ready(instance, 60.0);
     proc
+}
+
+/// Publishes motion commands into an instance from the test process (any client may
+/// command the planner), without the round trip of a `microrobot send` process, so
+/// commands land at the moments the test chooses.
+pub struct CommandSender {
+    _node: Node<ipc::Service>,
+    publisher: iceoryx2::port::publisher::Publisher<ipc::Service, MotionCommand, ()>,
+    notifier: iceoryx2::port::notifier::Notifier<ipc::Service>,
+    seq: u64,
+}
+
+impl CommandSender {
+    /// Opens the command stream of `instance` (a running pipeline's planner subscribes
+    /// to it before it reports ready).
+    pub fn open(instance: &str) -> Self {
+        let node = node(&format!("microrobot-test-commander-{}", std::process::id()));
+        let publisher =
+            open_publish_subscribe::<MotionCommand>(&node, instance, ServiceKind::Command)
+                .expect("command service")
+                .publisher_builder()
+                .create()
+                .expect("command publisher");
+        let notifier = open_event(&node, instance, ServiceKind::Command)
+            .expect("command event")
+            .notifier_builder()
+            .create()
+            .expect("command notifier");
+        Self {
+            _node: node,
+            publisher,
+            notifier,
+            seq: 0,
+        }
+    }
+
+    /// Sends `c` (numbered and stamped now).
+    pub fn send(&mut self, mut c: MotionCommand) {
+        self.seq += 1;
+        c.seq = self.seq;
+        c.stamp_ns = monotonic_ns();
+        self.publisher.send_copy(c).expect("send command");
+        let _ = self.notifier.notify();
+    }
+}
+
+/// A command of `kind` with no target.
+pub fn command(kind: CommandKind) -> MotionCommand {
+    MotionCommand {
+        kind: kind as u32,
+        limit_scale: 1.0,
+        ..Default::default()
+    }
+}
+
+/// A time-optimal joint move to `q` (rad or m).
+pub fn joint_move(q: &[f64]) -> MotionCommand {
+    let mut c = command(CommandKind::Move);
+    c.profile = ProfileKind::Soft as u32;
+    c.space = TargetSpace::Joint as u32;
+    c.dof = q.len() as u32;
+    c.target[..q.len()].copy_from_slice(q);
+    c
+}
+
+/// Waits until a status of `role` satisfies `f` (guard `guard_s`); returns it.
+pub fn wait_status(
+    instance: &str,
+    role: ServiceRole,
+    what: &str,
+    guard_s: f64,
+    f: impl Fn(&ServiceStatus) -> bool,
+) -> ServiceStatus {
+    let node = node(&format!("microrobot-test-status-{}", std::process::id()));
+    let sub = open_publish_subscribe::<ServiceStatus>(&node, instance, ServiceKind::Status)
+        .expect("status service")
+        .subscriber_builder()
+        .create()
+        .expect("status subscriber");
+    let t0 = Instant::now();
+    loop {
+        while let Ok(Some(s)) = sub.receive() {
+            if s.role == role as u32 && f(&s) {
+                return *s;
+            }
+        }
+        assert!(
+            t0.elapsed().as_secs_f64() < guard_s,
+            "{} of `{instance}`: {what} not seen within {guard_s} s",
+            role.name()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }

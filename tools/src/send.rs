@@ -44,7 +44,8 @@ pub enum SendCommand {
     Stop,
     /// Emergency stop: brake at once; motion is refused until `reset`.
     Estop,
-    /// Leave e-stop / the safe state; motion resumes from the measured state.
+    /// Leave e-stop (once its brake has come to rest) / the safe state (motion resumes
+    /// from the measured state).
     Reset,
     /// Enter teleop mode (arm at rest): the master device drives the arm until `stop`.
     Teleop,

@@ -10,6 +10,8 @@
 //! * Motion: the config's program (if any), then run-time [`MotionCommand`]s: Move
 //!   (joint or Cartesian target, soft/cubic/quintic/LSPB), Stop (shortest jerk-limited
 //!   stop), EStop (the same at the e-stop limits, then refuse motion until Reset), Reset.
+//!   A Reset during the e-stop's brake lets the brake finish: the e-stop lifts once the
+//!   arm is at rest, so the setpoint never steps.
 //!   Every command is validated field by field; a refused one is counted and never moves
 //!   the arm. A new motion is planned from the current setpoint state (q, q̇, q̈), so the
 //!   stream never jumps. A Move, Stop or EStop abandons the rest of the program.
@@ -79,7 +81,9 @@ pub enum CommandError {
     BadLimitScale(f64),
     #[error("the command is stale or from the future (stamp {age_ms:.1} ms old)")]
     Stale { age_ms: f64 },
-    #[error("motion is refused during an e-stop; send reset first")]
+    #[error(
+        "motion is refused during an e-stop; send reset first (a reset sent while braking takes effect at rest)"
+    )]
     EStopActive,
     #[error("motion is refused while the actuator is in its safe state; send reset first")]
     SafeStateActive,
@@ -190,6 +194,8 @@ pub struct PlannerCore {
     /// Why the last refused measured state was refused.
     pub last_state_refusal: Option<Refusal>,
     estop_at_ns: Option<u64>,
+    /// A Reset arrived while the e-stop was still braking: lift the e-stop at rest.
+    reset_after_brake: bool,
     /// A Reset arrived in [`Mode::SafeHold`]: resume when the actuator leaves its safe state.
     resume_pending: bool,
     /// `watchdog.auto_resume`: resume without a Reset when the actuator does.
@@ -256,6 +262,7 @@ impl PlannerCore {
             last_error: None,
             last_state_refusal: None,
             estop_at_ns: None,
+            reset_after_brake: false,
             resume_pending: false,
             auto_resume: cfg.watchdog.auto_resume,
             last_estop_latency_ns: None,
@@ -503,12 +510,15 @@ impl PlannerCore {
         match kind {
             CommandKind::Reset => {
                 match self.mode {
+                    Mode::EStop if self.motion.is_some() => {
+                        // Still braking: cutting the brake short would step the setpoint
+                        // velocity and acceleration to zero. The brake runs to rest and
+                        // `tick` lifts the e-stop there.
+                        self.reset_after_brake = true;
+                    }
                     Mode::EStop => {
-                        self.motion = None;
+                        // At rest (the brake's end holds qd = qdd = jerk = 0 exactly).
                         self.mode = Mode::Hold;
-                        self.current.qd = JointVector::zeros();
-                        self.current.qdd = JointVector::zeros();
-                        self.current.jerk = JointVector::zeros();
                     }
                     Mode::SafeHold => {
                         // Resume once the actuator has left its safe state (it takes
@@ -521,6 +531,7 @@ impl PlannerCore {
             }
             CommandKind::EStop => {
                 self.counters.estops += 1;
+                self.reset_after_brake = false;
                 self.estop_at_ns = Some(now_ns);
                 self.abandon_program(ProgramEnd::Command);
                 if self.mode == Mode::SafeHold {
@@ -707,6 +718,7 @@ impl PlannerCore {
                 );
                 self.abandon_program(ProgramEnd::SafeState);
                 self.motion = None;
+                self.reset_after_brake = false;
                 self.mode = Mode::SafeHold;
             }
             return;
@@ -774,6 +786,11 @@ impl PlannerCore {
                     self.current.jerk = JointVector::zeros();
                     if matches!(self.mode, Mode::Moving | Mode::Stopping) {
                         self.mode = Mode::Hold;
+                    }
+                    if self.mode == Mode::EStop && self.reset_after_brake {
+                        self.reset_after_brake = false;
+                        self.mode = Mode::Hold;
+                        tracing::info!("planner: e-stop brake finished; reset takes effect");
                     }
                 }
             }

@@ -292,3 +292,158 @@ fn a_second_master_device_is_refused_while_the_first_is_live() {
     let c = &p.teleop().counters;
     assert_eq!((c.samples, c.refused, c.second_device), (3, 3, 3));
 }
+
+/// The largest velocity and acceleration steps of a jerk-limited stream, per joint, as
+/// the limits allow them in one period (1 % slack for rounding).
+fn continuity_violation(
+    robot: &Robot,
+    a: &JointSetpoint,
+    b: &JointSetpoint,
+    period_s: f64,
+) -> Option<String> {
+    for (j, joint) in robot.joints().iter().enumerate() {
+        let l = &joint.limits;
+        let dqd = (b.qd[j] - a.qd[j]).abs();
+        let dqdd = (b.qdd[j] - a.qdd[j]).abs();
+        if dqd > l.acceleration * period_s * 1.01 + 1e-12 {
+            return Some(format!(
+                "joint {}: velocity step {} -> {} rad/s",
+                j + 1,
+                a.qd[j],
+                b.qd[j]
+            ));
+        }
+        if dqdd > l.jerk * period_s * 1.01 + 1e-12 {
+            return Some(format!(
+                "joint {}: acceleration step {} -> {} rad/s²",
+                j + 1,
+                a.qdd[j],
+                b.qdd[j]
+            ));
+        }
+    }
+    None
+}
+
+fn seed_robot() -> Robot {
+    Robot::from_file(
+        &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml"),
+    )
+    .unwrap()
+}
+
+/// A Reset while the e-stop still brakes does not cut the brake short (that stepped the
+/// setpoint velocity to zero in one tick): the brake runs to rest, motion stays refused
+/// until then, and the e-stop lifts at rest.
+#[test]
+fn a_reset_during_the_estop_brake_lets_the_brake_finish() {
+    // Far enough for joint 3 to be near its top speed (~1 rad/s) at the e-stop.
+    const FAR: [f64; 6] = [1.5, 1.2, 1.5, 1.5, 1.2, -1.5];
+    let robot = seed_robot();
+    let mut p = setup();
+    p.on_command(&mv(FAR, ProfileKind::Soft, 0.0), 1).unwrap();
+    let mut prev = p.tick(1);
+    for _ in 0..2000 {
+        prev = p.tick(1);
+    }
+    assert!(prev.qd[2] > 0.8, "joint 3 at speed: {:?}", prev.qd);
+    p.on_command(&cmd(CommandKind::EStop), 1).unwrap();
+    for _ in 0..300 {
+        prev = p.tick(1);
+    }
+    assert!(
+        prev.qd[2] > 0.5,
+        "still braking 0.3 s into the e-stop: {:?}",
+        prev.qd
+    );
+    p.on_command(&cmd(CommandKind::Reset), 1).unwrap();
+    assert_eq!(p.mode(), Mode::EStop, "the brake goes on");
+    assert_eq!(
+        p.on_command(&mv(T, ProfileKind::Soft, 0.0), 1),
+        Err(CommandError::EStopActive)
+    );
+    let mut ticks = 0;
+    while p.mode() == Mode::EStop {
+        let sp = p.tick(1);
+        if let Some(v) = continuity_violation(&robot, &prev, &sp, 1e-3) {
+            panic!("tick {ticks} after the reset: {v}");
+        }
+        prev = sp;
+        ticks += 1;
+        assert!(ticks < 10_000, "the brake never finished");
+    }
+    assert!(
+        ticks > 100,
+        "the brake ran on after the reset ({ticks} ticks)"
+    );
+    assert_eq!(p.mode(), Mode::Hold);
+    assert!(prev.qd.iter().chain(&prev.qdd).all(|v| *v == 0.0));
+    p.on_command(&mv(T, ProfileKind::Soft, 0.0), 1).unwrap();
+
+    // An e-stop after the reset, still braking, needs a reset of its own.
+    let mut p = setup();
+    p.on_command(&mv(T, ProfileKind::Soft, 0.0), 1).unwrap();
+    for _ in 0..1500 {
+        p.tick(1);
+    }
+    p.on_command(&cmd(CommandKind::EStop), 1).unwrap();
+    p.tick(1);
+    p.on_command(&cmd(CommandKind::Reset), 1).unwrap();
+    p.on_command(&cmd(CommandKind::EStop), 1).unwrap();
+    for _ in 0..10_000 {
+        p.tick(1);
+    }
+    assert_eq!(p.mode(), Mode::EStop, "the second e-stop holds until reset");
+}
+
+/// A flood of random commands (moves, stops, e-stops, resets at random ticks) keeps the
+/// setpoint velocity and acceleration continuous within the limits.
+#[test]
+fn a_flood_of_random_commands_keeps_the_setpoints_continuous() {
+    let robot = seed_robot();
+    let mut p = setup();
+    // xorshift64*: reproducible without a dependency.
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move || {
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        x.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    };
+    let mut prev = p.tick(1);
+    let (mut accepted, mut resets_while_braking) = (0, 0);
+    for k in 0..20_000 {
+        if next() % 20 == 0 {
+            let c = match next() % 4 {
+                0 => {
+                    let mut target = [0.0; 6];
+                    for (t, joint) in target.iter_mut().zip(robot.joints()) {
+                        let u = (next() >> 11) as f64 / (1u64 << 53) as f64;
+                        let l = &joint.limits;
+                        *t = l.min + 0.1 + u * (l.max - l.min - 0.2);
+                    }
+                    mv(target, ProfileKind::Soft, 0.0)
+                }
+                1 => cmd(CommandKind::Stop),
+                2 => cmd(CommandKind::EStop),
+                _ => {
+                    if p.mode() == Mode::EStop && prev.qd.iter().any(|v| *v != 0.0) {
+                        resets_while_braking += 1;
+                    }
+                    cmd(CommandKind::Reset)
+                }
+            };
+            accepted += p.on_command(&c, 1).is_ok() as u32;
+        }
+        let sp = p.tick(1);
+        if let Some(v) = continuity_violation(&robot, &prev, &sp, 1e-3) {
+            panic!("tick {k}: {v}");
+        }
+        prev = sp;
+    }
+    assert!(accepted > 50, "{accepted} commands accepted");
+    assert!(
+        resets_while_braking > 3,
+        "{resets_while_braking} resets while braking"
+    );
+}
