@@ -98,6 +98,36 @@ fn send_checks_targets_against_the_robot_the_instance_runs() {
         "{}",
         far.stderr
     );
+    // A refusal by the planner names the joint, the quantity, the value and the limit,
+    // in the units typed (j1's velocity limit is 135°/s), with the refusal's exit code.
+    let fast = run(
+        &[
+            "send",
+            "--instance",
+            &inst,
+            "move",
+            "--deg",
+            "--joints",
+            "90,0",
+            "--profile",
+            "quintic",
+            "--duration",
+            "0.5",
+        ],
+        60.0,
+    );
+    assert_eq!(
+        fast.code(),
+        Some(microrobot_runtime::exit_code::JOB_FAILED as i32),
+        "{}",
+        fast.stderr
+    );
+    assert!(
+        fast.stderr
+            .contains("j1 velocity 337.5°/s is outside [-135°/s, 135°/s]"),
+        "{}",
+        fast.stderr
+    );
     proc.signal(libc::SIGINT);
     let out = proc.finish(60.0);
     assert_eq!(out.code(), Some(0), "{}", out.stderr);

@@ -203,6 +203,52 @@ impl ProgramState {
     }
 }
 
+/// What a refused command's limit was about (`ServiceStatus::refusal_quantity`), so a
+/// tool can say "j2 acceleration −0.62 rad/s² is outside [−0.35, 0.35]" in the user's units.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum RefusalQuantity {
+    /// The refusal names no value and limit.
+    None = 0,
+    /// A joint position (rad or m).
+    Position = 1,
+    /// A joint velocity (rad/s or m/s).
+    Velocity = 2,
+    /// A joint acceleration (rad/s² or m/s²).
+    Acceleration = 3,
+    /// A joint jerk (rad/s³ or m/s³).
+    Jerk = 4,
+    /// The command's duration (s).
+    Duration = 5,
+}
+
+impl RefusalQuantity {
+    /// Decodes the wire value, `None` (the Option) for an unknown value.
+    pub fn from_wire(v: u32) -> Option<Self> {
+        Some(match v {
+            0 => Self::None,
+            1 => Self::Position,
+            2 => Self::Velocity,
+            3 => Self::Acceleration,
+            4 => Self::Jerk,
+            5 => Self::Duration,
+            _ => return Option::None,
+        })
+    }
+
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "value",
+            Self::Position => "position",
+            Self::Velocity => "velocity",
+            Self::Acceleration => "acceleration",
+            Self::Jerk => "jerk",
+            Self::Duration => "duration",
+        }
+    }
+}
+
 /// What the planner is doing (`ServiceStatus::activity`), for operators' tools.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
@@ -392,4 +438,14 @@ pub struct ServiceStatus {
     pub activity: u32,
     /// Zero; keeps the size a multiple of 8.
     pub reserved: u32,
+    /// Planner: the joint the last refused command's limit was about, as index + 1
+    /// (0: none).
+    pub refusal_joint: u32,
+    /// Planner: a [`RefusalQuantity`] value, what that limit was about.
+    pub refusal_quantity: u32,
+    /// Planner: the refused value, and the range it had to be in (SI; ±infinity for an
+    /// open side).
+    pub refusal_value: f64,
+    pub refusal_min: f64,
+    pub refusal_max: f64,
 }

@@ -43,7 +43,12 @@ fn status_layout_is_stable() {
     assert_eq!(offset_of!(ServiceStatus, program_end), 348);
     assert_eq!(offset_of!(ServiceStatus, activity), 352);
     assert_eq!(offset_of!(ServiceStatus, reserved), 356);
-    assert_eq!(size_of::<ServiceStatus>(), 360);
+    assert_eq!(offset_of!(ServiceStatus, refusal_joint), 360);
+    assert_eq!(offset_of!(ServiceStatus, refusal_quantity), 364);
+    assert_eq!(offset_of!(ServiceStatus, refusal_value), 368);
+    assert_eq!(offset_of!(ServiceStatus, refusal_min), 376);
+    assert_eq!(offset_of!(ServiceStatus, refusal_max), 384);
+    assert_eq!(size_of::<ServiceStatus>(), 392);
     assert_eq!(align_of::<ServiceStatus>(), 8);
 }
 
@@ -92,6 +97,11 @@ fn wire_enums_round_trip_and_refuse_unknown_values() {
         assert_eq!(a as u32, v);
     }
     assert_eq!(Activity::from_wire(8), None);
+    for v in 0..=5 {
+        let q = RefusalQuantity::from_wire(v).expect("known quantity");
+        assert_eq!(q as u32, v);
+    }
+    assert_eq!(RefusalQuantity::from_wire(6), None);
 }
 
 #[test]

@@ -333,10 +333,13 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
                 let why = RefusalReason::from_wire(st.last_command_refusal)
                     .filter(|r| *r != RefusalReason::None)
                     .map_or("see its log for why", RefusalReason::describe);
-                bail!(
-                    "the planner of `{instance}` refused the command: {why} (refused commands: {}; its log has the details)",
-                    st.commands_refused
-                );
+                let deg = matches!(&args.command, SendCommand::Move(m) if m.deg);
+                let detail = refusal_detail(st, robot.as_ref(), deg);
+                return Err(crate::exit::with_code(
+                    microrobot_runtime::exit_code::JOB_FAILED,
+                )(anyhow::anyhow!(
+                    "the planner of `{instance}` refused the command: {why}{detail}"
+                )));
             }
             if st.commands_accepted > base.commands_accepted {
                 println!(
@@ -353,4 +356,59 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
         );
         std::thread::sleep(Duration::from_millis(10));
     }
+}
+
+/// The limit a refused command broke, from the planner's status, in the units the user
+/// typed (`--deg`: degrees or mm, else rad or m), e.g. `: j2 acceleration -35.5°/s² is
+/// outside [-20°/s², 20°/s²]`; empty when the refusal names no limit.
+fn refusal_detail(
+    st: &microrobot_messages::ServiceStatus,
+    robot: Option<&Robot>,
+    deg: bool,
+) -> String {
+    use microrobot_messages::RefusalQuantity as Q;
+    let Some(q) = Q::from_wire(st.refusal_quantity).filter(|q| *q != Q::None) else {
+        return String::new();
+    };
+    let joint = (st.refusal_joint as usize).checked_sub(1);
+    let kind = joint
+        .and_then(|j| robot.and_then(|r| r.joints().get(j)))
+        .map_or(JointKind::Revolute, |j| j.kind);
+    let name = joint.map(|j| {
+        robot
+            .and_then(|r| r.joints().get(j))
+            .map_or(format!("joint {}", j + 1), |jt| jt.name.clone())
+    });
+    let (scale, base) = match (q, kind, deg) {
+        (Q::Duration, _, _) => (1.0, " s"),
+        (_, JointKind::Revolute, true) => (180.0 / std::f64::consts::PI, "°"),
+        (_, JointKind::Prismatic, true) => (1000.0, " mm"),
+        (_, JointKind::Revolute, false) => (1.0, " rad"),
+        (_, JointKind::Prismatic, false) => (1.0, " m"),
+    };
+    let per = match q {
+        Q::Velocity => "/s",
+        Q::Acceleration => "/s²",
+        Q::Jerk => "/s³",
+        _ => "",
+    };
+    let u = |x: f64| {
+        if x.is_infinite() {
+            if x > 0.0 {
+                "∞".to_string()
+            } else {
+                "-∞".to_string()
+            }
+        } else {
+            format!("{}{base}{per}", crate::check::trim_number(x * scale))
+        }
+    };
+    format!(
+        ": {}{} {} is outside [{}, {}]",
+        name.map(|n| format!("{n} ")).unwrap_or_default(),
+        q.name(),
+        u(st.refusal_value),
+        u(st.refusal_min),
+        u(st.refusal_max)
+    )
 }

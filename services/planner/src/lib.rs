@@ -36,8 +36,8 @@ pub mod teleop;
 use anyhow::Context as _;
 use microrobot_messages::{
     Activity, CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState,
-    MAX_JOINTS, MasterPose, MotionCommand, ProfileKind, ProgramEnd, ProgramState, RefusalReason,
-    ServiceKind, ServiceRole, ServiceStatus, TargetSpace, monotonic_ns, open_event,
+    MAX_JOINTS, MasterPose, MotionCommand, ProfileKind, ProgramEnd, ProgramState, RefusalQuantity,
+    RefusalReason, ServiceKind, ServiceRole, ServiceStatus, TargetSpace, monotonic_ns, open_event,
     open_publish_subscribe, setpoint_flags, state_flags,
 };
 use microrobot_model::ik::{IkOptions, IkTarget};
@@ -48,7 +48,7 @@ use microrobot_runtime::validate::{Refusal, SeqTracker, check_fresh, check_state
 use microrobot_runtime::{BadConfig, PeriodicClock, Reactor, Shutdown, StatusPort, open_node};
 use microrobot_trajectory::{
     Generator, JointState, JointVector, KinematicLimits, MotionRequest, Profile, Sample, Status,
-    Trajectory, stop_trajectory,
+    Trajectory, TrajectoryError, stop_trajectory,
 };
 
 use crate::program::ProgramRunner;
@@ -93,6 +93,8 @@ pub enum CommandError {
     BadQuaternion,
     #[error("cannot plan: {0}")]
     Plan(String),
+    #[error("no trajectory within the limits: {0}")]
+    Limits(TrajectoryError),
     #[error("the measured state is not known yet")]
     NotStarted,
     #[error("teleop is not available: {0}")]
@@ -101,7 +103,96 @@ pub enum CommandError {
     TeleopNotAtRest,
 }
 
+/// The limit a refused command broke: joint (index), quantity, value and range (SI).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefusalDetail {
+    pub joint: Option<usize>,
+    pub quantity: RefusalQuantity,
+    pub value: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+/// What a trajectory field name (`start.qdd`, `limits.velocity`, …) is a limit on.
+fn quantity_of(field: &str) -> RefusalQuantity {
+    if field.ends_with(".qdd") || field.ends_with("acceleration") {
+        RefusalQuantity::Acceleration
+    } else if field.ends_with(".qd") || field.ends_with("velocity") {
+        RefusalQuantity::Velocity
+    } else if field.ends_with("jerk") {
+        RefusalQuantity::Jerk
+    } else if field.ends_with(".q") || field.contains("position") {
+        RefusalQuantity::Position
+    } else {
+        RefusalQuantity::None
+    }
+}
+
 impl CommandError {
+    /// The joint, quantity, value and range behind the refusal, where it has them (what
+    /// `ServiceStatus::refusal_*` carries, so `send` can say it in the user's units).
+    pub fn detail(&self) -> Option<RefusalDetail> {
+        let inf = f64::INFINITY;
+        match *self {
+            Self::OutOfLimits {
+                joint,
+                value,
+                min,
+                max,
+            } => Some(RefusalDetail {
+                joint: Some(joint),
+                quantity: RefusalQuantity::Position,
+                value,
+                min,
+                max,
+            }),
+            Self::BadDuration(d) => Some(RefusalDetail {
+                joint: None,
+                quantity: RefusalQuantity::Duration,
+                value: d,
+                min: 0.0,
+                max: 3600.0,
+            }),
+            Self::Limits(TrajectoryError::OutOfRange {
+                joint,
+                field,
+                value,
+                min,
+                max,
+            }) => Some(RefusalDetail {
+                joint: Some(joint),
+                quantity: quantity_of(field),
+                value,
+                min,
+                max,
+            }),
+            Self::Limits(TrajectoryError::PositionOverrun {
+                joint,
+                field,
+                reached,
+                limit,
+            }) => Some(RefusalDetail {
+                joint: Some(joint),
+                quantity: RefusalQuantity::Position,
+                value: reached,
+                min: if field.ends_with("min") { limit } else { -inf },
+                max: if field.ends_with("min") { inf } else { limit },
+            }),
+            Self::Limits(TrajectoryError::NotPositive {
+                joint,
+                field,
+                value,
+            }) => Some(RefusalDetail {
+                joint: Some(joint),
+                quantity: quantity_of(field),
+                value,
+                min: 0.0,
+                max: inf,
+            }),
+            _ => None,
+        }
+    }
+
     /// The wire code reported in `ServiceStatus::last_command_refusal`.
     pub fn reason(&self) -> RefusalReason {
         match self {
@@ -118,7 +209,7 @@ impl CommandError {
             Self::SafeStateActive => RefusalReason::SafeStateActive,
             Self::Unreachable(_) => RefusalReason::Unreachable,
             Self::BadQuaternion => RefusalReason::BadQuaternion,
-            Self::Plan(_) => RefusalReason::CannotPlan,
+            Self::Plan(_) | Self::Limits(_) => RefusalReason::CannotPlan,
             Self::NotStarted => RefusalReason::NotStarted,
             Self::TeleopUnavailable(_) => RefusalReason::TeleopUnavailable,
             Self::TeleopNotAtRest => RefusalReason::TeleopNotAtRest,
@@ -474,8 +565,8 @@ impl PlannerCore {
         } else {
             self.full_limits
         };
-        let t = stop_trajectory(self.dof, &self.current.state(), &lim)
-            .map_err(|e| CommandError::Plan(e.to_string()))?;
+        let t =
+            stop_trajectory(self.dof, &self.current.state(), &lim).map_err(CommandError::Limits)?;
         self.motion = Some(Generator::new(t));
         self.mode = if estop { Mode::EStop } else { Mode::Stopping };
         Ok(())
@@ -683,11 +774,11 @@ impl PlannerCore {
             profile,
             limits,
         };
-        let t = Trajectory::plan(&req).map_err(|e| CommandError::Plan(e.to_string()))?;
+        let t = Trajectory::plan(&req).map_err(CommandError::Limits)?;
         // Fixed-duration profiles are not planned within the limits: refuse the ones
         // that would exceed the robot's own limits.
         t.check_limits(&self.full_limits, profile_kind == ProfileKind::Quintic)
-            .map_err(|e| CommandError::Plan(e.to_string()))?;
+            .map_err(CommandError::Limits)?;
         Ok(t)
     }
 
@@ -1001,6 +1092,12 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             core.last_error
                 .as_ref()
                 .map_or(RefusalReason::None, CommandError::reason) as u32;
+        let detail = core.last_error.as_ref().and_then(CommandError::detail);
+        st.refusal_joint = detail.and_then(|d| d.joint).map_or(0, |j| j as u32 + 1);
+        st.refusal_quantity = detail.map_or(RefusalQuantity::None, |d| d.quantity) as u32;
+        st.refusal_value = detail.map_or(0.0, |d| d.value);
+        st.refusal_min = detail.map_or(0.0, |d| d.min);
+        st.refusal_max = detail.map_or(0.0, |d| d.max);
         st.last_input_refusal = core
             .last_state_refusal
             .map_or(RefusalReason::None, Refusal::reason) as u32;
