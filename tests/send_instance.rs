@@ -122,9 +122,11 @@ fn send_checks_targets_against_the_robot_the_instance_runs() {
         "{}",
         fast.stderr
     );
+    // The peak depends on where the earlier move left the arm; the limit does not.
     assert!(
         fast.stderr
-            .contains("j1 velocity 337.5°/s is outside [-135°/s, 135°/s]"),
+            .contains("refused the command: no trajectory within the limits: j1 velocity ")
+            && fast.stderr.contains("°/s is outside [-135°/s, 135°/s]"),
         "{}",
         fast.stderr
     );
