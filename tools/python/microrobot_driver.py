@@ -227,7 +227,7 @@ def take(subscriber, cls):
         if s is None:
             return out
         out.append((cls.from_buffer_copy(s.payload().contents),
-                    s.header().publisher_id().value()))
+                    s.header.publisher_id.value))
         s.delete()
 
 
@@ -575,7 +575,11 @@ class Driver:
         self.cmd_sub, self.cmd_listener = open_subscriber(self.node, inst, "command")
         self.state_pub, self.state_notifier = open_publisher(self.node, inst, "state")
         self.status_pub, self.status_notifier = open_publisher(self.node, inst, "status")
-        self.waitset = iox2.WaitSetBuilder.new().create(iox2.ServiceType.Ipc)
+        # iceoryx2's own SIGINT/SIGTERM handling off (node and WaitSet): it would take the
+        # signals from Python's handlers, and the loop would never see the stop.
+        self.waitset = (iox2.WaitSetBuilder.new()
+                        .signal_handling_mode(iox2.SignalHandlingMode.Disabled)
+                        .create(iox2.ServiceType.Ipc))
         self._guards = [self.waitset.attach_notification(self.torque_listener),
                         self.waitset.attach_notification(self.cmd_listener)]
 
@@ -594,7 +598,10 @@ class Driver:
     def _wait(self, timeout_ns):
         if timeout_ns > 0:
             try:
-                self.waitset.wait_and_process_with_timeout(iox2.Duration.from_nanos(int(timeout_ns)))
+                _, result = self.waitset.wait_and_process_with_timeout(
+                    iox2.Duration.from_nanos(int(timeout_ns)))
+                if result == iox2.WaitSetRunResult.TerminationRequest:
+                    self.stop_requested = True
             except iox2.WaitSetRunError:  # interrupted by a signal: the loop looks at it
                 pass
         self.torque_listener.try_wait()
