@@ -48,8 +48,11 @@ class DampedInertiaArm(Driver):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--inertia", type=float, default=0.05, help="J per joint, kg m^2 (0.05)")
-    p.add_argument("--damping", type=float, default=0.1, help="b per joint, N m s/rad (0.1)")
+    # J above the seed arm's own joint inertias (~0.1-0.3 kg m^2): the dynamics' feedback,
+    # computed for the seed arm, then has less loop gain on this plant, not more, and
+    # stays stable when the driver is late (J = 0.05 overshot by > 1 rad after stalls).
+    p.add_argument("--inertia", type=float, default=0.3, help="J per joint, kg m^2 (0.3)")
+    p.add_argument("--damping", type=float, default=0.5, help="b per joint, N m s/rad (0.5)")
     p.add_argument("--start-delay", type=float, default=0.0, metavar="S",
                    help="sleep this long before opening any port (a slow drive bus)")
     a = p.parse_args(argv)
