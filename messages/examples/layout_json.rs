@@ -42,7 +42,7 @@ macro_rules! layout {
 }
 
 fn main() {
-    let mut types = vec![
+    let mut types = [
         layout!(Header {
             seq,
             tick,
