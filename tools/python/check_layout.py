@@ -1,0 +1,89 @@
+#!/usr/bin/env python3
+"""Checks the ctypes structs of tools/python/microrobot_driver.py against the Rust types.
+
+The Rust side prints every payload's type name, size, alignment and each field's offset
+and size (messages/examples/layout_json.rs, which fails to compile when a Rust field is
+not listed there). This compares them with the ctypes structs, field by field, and exits 1
+naming every mismatch: a field missing on either side, at another offset or of another
+size, another size, alignment or type name of a payload.
+
+Usage: python3 tools/python/check_layout.py [--json FILE]
+  (without --json it runs `cargo run -q -p microrobot-messages --example layout_json`)
+"""
+
+import argparse
+import ctypes
+import json
+import os
+import subprocess
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import microrobot_driver as mr  # noqa: E402
+
+
+def python_layout(cls):
+    fields = []
+    for name, _ in cls._fields_:
+        d = getattr(cls, name)
+        fields.append({"name": name, "offset": d.offset, "size": d.size})
+    return {"type_name": cls.type_name(), "size": ctypes.sizeof(cls),
+            "align": ctypes.alignment(cls), "fields": fields}
+
+
+def compare(rust, classes):
+    errors = []
+    py = {c.__name__: c for c in classes}
+    for name in sorted(set(rust) | set(py)):
+        if name not in py:
+            errors.append(f"{name}: a Rust payload with no ctypes struct in microrobot_driver.py")
+            continue
+        if name not in rust:
+            errors.append(f"{name}: a ctypes struct the Rust layout does not list")
+            continue
+        r, p = rust[name], python_layout(py[name])
+        for key in ("type_name", "size", "align"):
+            if r[key] != p[key]:
+                errors.append(f"{name}: {key} is {r[key]!r} in Rust, {p[key]!r} in Python")
+        rf = {f["name"]: f for f in r["fields"]}
+        pf = {f["name"]: f for f in p["fields"]}
+        for f in r["fields"]:
+            if f["name"] not in pf:
+                errors.append(f"{name}.{f['name']}: missing in Python (Rust: offset {f['offset']}, "
+                              f"{f['size']} B)")
+            elif (pf[f["name"]]["offset"], pf[f["name"]]["size"]) != (f["offset"], f["size"]):
+                q = pf[f["name"]]
+                errors.append(f"{name}.{f['name']}: offset {q['offset']}, {q['size']} B in Python, "
+                              f"offset {f['offset']}, {f['size']} B in Rust")
+        for f in p["fields"]:
+            if f["name"] not in rf:
+                errors.append(f"{name}.{f['name']}: in Python only (offset {f['offset']})")
+    return errors
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--json", help="the Rust layout (default: run the messages crate's example)")
+    a = ap.parse_args(argv)
+    if a.json:
+        text = open(a.json).read()
+    else:
+        repo = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
+        text = subprocess.run(["cargo", "run", "-q", "-p", "microrobot-messages", "--example",
+                               "layout_json"], cwd=repo, check=True, capture_output=True,
+                              text=True).stdout
+    rust = json.loads(text)
+    errors = compare(rust, mr.PAYLOADS)
+    for e in errors:
+        print(f"check_layout: {e}", file=sys.stderr)
+    if errors:
+        print(f"check_layout: FAIL: {len(errors)} mismatch(es) between the Rust payloads and "
+              "tools/python/microrobot_driver.py", file=sys.stderr)
+        return 1
+    print(f"check_layout: ok: {len(rust)} payloads, "
+          f"{sum(len(t['fields']) for t in rust.values())} fields match")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
