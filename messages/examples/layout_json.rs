@@ -129,7 +129,12 @@ fn main() {
             program_state,
             program_end,
             activity,
-            reserved
+            reserved,
+            refusal_joint,
+            refusal_quantity,
+            refusal_value,
+            refusal_min,
+            refusal_max
         }),
         layout!(MasterPose {
             seq,

@@ -117,7 +117,10 @@ class ServiceStatus(ctypes.Structure):
                 ("estop_latency_ns", ctypes.c_uint64), ("estop_latency_max_ns", ctypes.c_uint64),
                 ("last_command_refusal", ctypes.c_uint32), ("last_input_refusal", ctypes.c_uint32),
                 ("program_state", ctypes.c_uint32), ("program_end", ctypes.c_uint32),
-                ("activity", ctypes.c_uint32), ("reserved", ctypes.c_uint32)]
+                ("activity", ctypes.c_uint32), ("reserved", ctypes.c_uint32),
+                ("refusal_joint", ctypes.c_uint32), ("refusal_quantity", ctypes.c_uint32),
+                ("refusal_value", ctypes.c_double), ("refusal_min", ctypes.c_double),
+                ("refusal_max", ctypes.c_double)]
 
 
 @_named("MasterPose")
