@@ -35,6 +35,15 @@ pub enum RobotFileError {
         /// Parser message (with line and column).
         message: String,
     },
+    /// Not a URDF document `urdf-rs` can read (XML syntax, a missing required
+    /// attribute, a wrong number of values).
+    #[error("{file}: invalid URDF: {message}")]
+    UrdfSyntax {
+        /// File name.
+        file: String,
+        /// Parser message.
+        message: String,
+    },
     /// A required key is absent.
     #[error("{file}: {key}: missing required key")]
     MissingKey {
@@ -89,7 +98,7 @@ impl RobotFileError {
     /// The key path the error is about (`None` for I/O and syntax errors).
     pub fn key(&self) -> Option<&str> {
         match self {
-            Self::Io { .. } | Self::Syntax { .. } => None,
+            Self::Io { .. } | Self::Syntax { .. } | Self::UrdfSyntax { .. } => None,
             Self::MissingKey { key, .. }
             | Self::UnknownKey { key, .. }
             | Self::WrongType { key, .. }
@@ -455,12 +464,13 @@ impl Reader<'_> {
             }
         }
         let urdf_path: PathBuf = dir.join(urdf_rel);
-        let (urdf_name, text) = read_text(&urdf_path).map_err(|e| {
+        let text = std::fs::read_to_string(&urdf_path).map_err(|e| {
             self.invalid(
                 "robot.urdf".into(),
                 format!("cannot read {}: {e}", urdf_path.display()),
             )
         })?;
+        let urdf_name = file_name(&urdf_path);
         let sel = urdf::Selection {
             base_link,
             tip_link,

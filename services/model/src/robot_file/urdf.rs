@@ -151,9 +151,9 @@ pub(crate) fn triangle_warning(inertia: &Matrix3<f64>) -> Option<String> {
 /// The chain from `base_link` to `tip_link` of the URDF `text` (file name `file`).
 pub(crate) fn load(text: &str, file: &str, sel: &Selection) -> Res<UrdfChain> {
     let ctx = Ctx { file };
-    let model = urdf_rs::read_from_string(text).map_err(|e| RobotFileError::Syntax {
+    let model = urdf_rs::read_from_string(text).map_err(|e| RobotFileError::UrdfSyntax {
         file: file.to_string(),
-        message: format!("not a URDF robot: {e}"),
+        message: e.to_string(),
     })?;
     let mut warnings = Vec::new();
 
