@@ -1,5 +1,7 @@
 //! Criterion benchmarks of the hot-path algorithms on the seed arm
-//! (`config/robots/seed-arm.toml`) at random states inside its limits.
+//! (`config/robots/seed-arm.toml`, `model/*`) and the Panda from URDF
+//! (`tests/reference/urdf/panda.toml`, `model/panda/*`) at random states inside
+//! their limits.
 //! Run: `cargo bench -p microrobot-model --bench model`.
 //!
 //! Time is the benchmark thread's own CPU time (Linux
@@ -111,31 +113,42 @@ impl Measurement for ThreadCpuTime {
 }
 
 fn benches<M: Measurement + 'static>(c: &mut Criterion<M>) {
-    let robot = common::seed_arm();
-    let mut data = ModelData::new(&robot);
-    let st = states(&robot);
+    bench_robot(c, "model", &common::seed_arm(), true);
+    bench_robot(c, "model/panda", &common::panda(), false);
+}
+
+/// `{prefix}/fk`, `/jacobian`, `/rnea`, `/mass_matrix`, `/forward_dynamics` (and
+/// `/lagrange_euler` if asked) on `robot` at its 64 random states.
+fn bench_robot<M: Measurement + 'static>(
+    c: &mut Criterion<M>,
+    prefix: &str,
+    robot: &Robot,
+    lagrange: bool,
+) {
+    let mut data = ModelData::new(robot);
+    let st = states(robot);
     let mut k = 0usize;
     let mut next = || {
         k = (k + 1) % STATES;
         &st[k]
     };
-    c.bench_function("model/fk", |b| {
+    c.bench_function(&format!("{prefix}/fk"), |b| {
         b.iter(|| {
             let s = next();
-            forward_kinematics(&robot, &mut data, black_box(&s.q))
+            forward_kinematics(robot, &mut data, black_box(&s.q))
         })
     });
-    c.bench_function("model/jacobian", |b| {
+    c.bench_function(&format!("{prefix}/jacobian"), |b| {
         b.iter(|| {
             let s = next();
-            jacobian(&robot, &mut data, black_box(&s.q))
+            jacobian(robot, &mut data, black_box(&s.q))
         })
     });
-    c.bench_function("model/rnea", |b| {
+    c.bench_function(&format!("{prefix}/rnea"), |b| {
         b.iter(|| {
             let s = next();
             rnea(
-                &robot,
+                robot,
                 &mut data,
                 black_box(&s.q),
                 black_box(&s.qd),
@@ -143,17 +156,17 @@ fn benches<M: Measurement + 'static>(c: &mut Criterion<M>) {
             )
         })
     });
-    c.bench_function("model/mass_matrix", |b| {
+    c.bench_function(&format!("{prefix}/mass_matrix"), |b| {
         b.iter(|| {
             let s = next();
-            mass_matrix(&robot, &mut data, black_box(&s.q))
+            mass_matrix(robot, &mut data, black_box(&s.q))
         })
     });
-    c.bench_function("model/forward_dynamics", |b| {
+    c.bench_function(&format!("{prefix}/forward_dynamics"), |b| {
         b.iter(|| {
             let s = next();
             forward_dynamics(
-                &robot,
+                robot,
                 &mut data,
                 black_box(&s.q),
                 black_box(&s.qd),
@@ -161,12 +174,14 @@ fn benches<M: Measurement + 'static>(c: &mut Criterion<M>) {
             )
         })
     });
-    c.bench_function("model/lagrange_euler", |b| {
-        b.iter(|| {
-            let s = next();
-            lagrange_euler::torque(&robot, black_box(&s.q), black_box(&s.qd), black_box(&s.qdd))
-        })
-    });
+    if lagrange {
+        c.bench_function(&format!("{prefix}/lagrange_euler"), |b| {
+            b.iter(|| {
+                let s = next();
+                lagrange_euler::torque(robot, black_box(&s.q), black_box(&s.qd), black_box(&s.qdd))
+            })
+        });
+    }
 }
 
 fn model() {

@@ -23,8 +23,12 @@ pub struct ModelData {
     pub(crate) sin: [f64; MAX_JOINTS],
     /// Each joint's DH d (with `q` for prismatic joints).
     pub(crate) d: [f64; MAX_JOINTS],
-    /// Frame poses in the base frame: `frames[0]` is the base, `frames[i]` DH frame `i`.
+    /// Frame poses in the base frame: `frames[0]` is the base, `frames[i]` frame `i`
+    /// (DH frame `i`, or joint `i`'s child frame for placed joints).
     pub(crate) frames: [Pose; MAX_JOINTS + 1],
+    /// Placed joints: each joint's transform from frame `i-1` to frame `i`
+    /// (placement, then the motion for `q`).
+    pub(crate) local: [Pose; MAX_JOINTS],
     /// Tool frame in the base frame.
     pub(crate) tool: Pose,
     /// RNEA: body forces and moments (frame `i`, about its origin).
@@ -44,6 +48,7 @@ impl ModelData {
             sin: [0.0; MAX_JOINTS],
             d: [0.0; MAX_JOINTS],
             frames: [Pose::IDENTITY; MAX_JOINTS + 1],
+            local: [Pose::IDENTITY; MAX_JOINTS],
             tool: Pose::IDENTITY,
             force: [Vector3::zeros(); MAX_JOINTS],
             moment: [Vector3::zeros(); MAX_JOINTS],
@@ -51,9 +56,9 @@ impl ModelData {
         }
     }
 
-    /// Pose of DH frame `i` in the base frame after the last kinematics call
+    /// Pose of frame `i` (DH frame `i`, or placed joint `i`'s child link frame) in the base frame after the last kinematics call
     /// ([`crate::forward_kinematics`], [`crate::jacobian`], [`crate::tool_pose`]):
-    /// `frame(0)` is the base, `frame(dof)` the last DH frame. Indices beyond
+    /// `frame(0)` is the base, `frame(dof)` the last joint frame. Indices beyond
     /// [`MAX_JOINTS`] give the identity.
     pub fn frame(&self, i: usize) -> Pose {
         self.frames.get(i).copied().unwrap_or(Pose::IDENTITY)

@@ -144,7 +144,10 @@ fn splitmix(state: &mut u64) -> f64 {
 fn reach(robot: &Robot) -> f64 {
     let mut r = robot.tool().translation.norm();
     for j in robot.joints() {
-        r += j.dh.a.abs() + j.dh.d.abs();
+        r += match &j.placement {
+            Some(p) => p.origin.translation.norm(),
+            None => j.dh.a.abs() + j.dh.d.abs(),
+        };
         if j.kind == crate::JointKind::Prismatic {
             r += j.limits.min.abs().max(j.limits.max.abs());
         }

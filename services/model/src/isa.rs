@@ -126,7 +126,8 @@ mod tests {
 
     /// The AVX2 build against the baseline build of every entry point, bit for
     /// bit, on robots with revolute and prismatic joints, offsets, tool, payload
-    /// and friction, including angles that take the large-argument fallback.
+    /// and friction, DH rows and placed joints, including angles that take the
+    /// large-argument fallback.
     #[test]
     #[allow(clippy::needless_range_loop)] // s[k][i] reads like the state table
     fn avx2_build_equals_the_baseline_bit_for_bit() {
@@ -161,9 +162,15 @@ mod tests {
             out.extend(forward::forward_dynamics_with::<S>(r, d, q, qd, qdd).iter());
             out
         }
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/robots");
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
         let mut next = crate::test_support::uniform(0x9e37_79b9_7f4a_7c15);
-        for file in ["seed-arm.toml", "spherical-rrp.toml", "planar-2r.toml"] {
+        for file in [
+            "config/robots/seed-arm.toml",
+            "config/robots/spherical-rrp.toml",
+            "config/robots/planar-2r.toml",
+            // placed joints (the general path): revolute, continuous, prismatic
+            "tests/reference/urdf/test_arm.toml",
+        ] {
             let robot = Robot::from_file(&dir.join(file)).unwrap_or_else(|e| panic!("{e}"));
             let mut data = ModelData::new(&robot);
             for case in 0..200 {

@@ -100,6 +100,9 @@ pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData, n: usize) {
 
 #[inline(always)]
 pub(crate) fn update_kinematics_with<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) {
+    if robot.general {
+        return crate::general::update_kinematics::<S>(robot, data, q);
+    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         update_frames(robot, data, n)
@@ -128,6 +131,9 @@ pub(crate) fn jacobian_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> Jacobian {
+    if robot.general {
+        return crate::general::jacobian::<S>(robot, data, q);
+    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         update_frames(robot, data, n);
@@ -161,6 +167,9 @@ multiversion! {
 /// The Jacobian from the frames already in `data`.
 #[inline(always)]
 pub(crate) fn jacobian_from_frames(robot: &Robot, data: &ModelData) -> Jacobian {
+    if robot.general {
+        return crate::general::jacobian_from_frames(robot, data);
+    }
     jacobian_of_frames(robot, data, robot.dof, robot.plain)
 }
 

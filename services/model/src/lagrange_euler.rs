@@ -18,6 +18,7 @@
 //! Indices in the code are zero-based: joint `j` (0..n) moves frame `j+1`, and
 //! body `p` (0..n) is attached to frame `p+1`.
 
+use crate::math::Pose;
 use crate::robot::{Robot, friction};
 use crate::{JointVector, MAX_JOINTS, MassMatrix};
 use nalgebra::{Matrix3, Matrix4, Vector4};
@@ -37,9 +38,20 @@ struct Chain {
     u_mat: [[Mat4; MAX_JOINTS]; MAX_JOINTS],
 }
 
-/// `ʲ⁻¹T_j` of seed eq. 1 for joint `j` (zero-based) at position `q`.
-fn dh_matrix(robot: &Robot, j: usize, q: f64) -> Mat4 {
+/// `ʲ⁻¹T_j` for joint `j` (zero-based) at position `q`: seed eq. 1, or for a
+/// placed joint the placement times the motion (`X · M(q)`).
+fn joint_matrix(robot: &Robot, j: usize, q: f64) -> Mat4 {
     let joint = &robot.joints()[j];
+    if let Some(p) = &joint.placement {
+        let axis = p.axis.normalize();
+        let motion = if joint.kind == crate::JointKind::Revolute {
+            nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_unchecked(axis), q)
+                .to_homogeneous()
+        } else {
+            nalgebra::Translation3::from(axis * q).to_homogeneous()
+        };
+        return p.origin.to_homogeneous() * motion;
+    }
     let revolute = robot.consts[j].revolute;
     let theta = joint.dh.theta + if revolute { q } else { 0.0 };
     let d = joint.dh.d + if revolute { 0.0 } else { q };
@@ -86,13 +98,34 @@ impl Chain {
         let mut pseudo = [Mat4::zeros(); MAX_JOINTS];
         let mut local = [Mat4::identity(); MAX_JOINTS];
         for j in 0..n {
-            local[j] = dh_matrix(robot, j, q[j]);
+            local[j] = joint_matrix(robot, j, q[j]);
+            let joint = &robot.joints()[j];
+            let revolute = joint.kind == crate::JointKind::Revolute;
             let mut qm = Mat4::zeros();
-            if robot.consts[j].revolute {
-                qm[(0, 1)] = -1.0;
-                qm[(1, 0)] = 1.0;
-            } else {
-                qm[(2, 3)] = 1.0;
+            match &joint.placement {
+                None if revolute => {
+                    qm[(0, 1)] = -1.0;
+                    qm[(1, 0)] = 1.0;
+                }
+                None => qm[(2, 3)] = 1.0,
+                // ∂(X M(q))/∂q = X G M(q) = (X G X⁻¹) · X M(q), with G the
+                // motion's generator: [a]× (revolute) or a translation (prismatic).
+                Some(p) => {
+                    let a = p.axis.normalize();
+                    let mut g = Mat4::zeros();
+                    if revolute {
+                        g.fixed_view_mut::<3, 3>(0, 0).copy_from(&a.cross_matrix());
+                    } else {
+                        g.fixed_view_mut::<3, 1>(0, 3).copy_from(&a);
+                    }
+                    let x = p.origin.to_homogeneous();
+                    let x_inv = Pose {
+                        rotation: p.origin.rotation.transpose(),
+                        translation: -(p.origin.rotation.transpose() * p.origin.translation),
+                    }
+                    .to_homogeneous();
+                    qm = x * g * x_inv;
+                }
             }
             q_mat[j] = qm;
             let b = &robot.bodies[j];
@@ -164,7 +197,7 @@ fn mass_matrix_of(robot: &Robot, ch: &Chain) -> MassMatrix {
         }
     }
     for i in 0..n {
-        m[(i, i)] += robot.consts[i].rotor;
+        m[(i, i)] += robot.joints()[i].rotor_inertia;
     }
     m
 }
@@ -228,8 +261,8 @@ pub fn torque(robot: &Robot, q: &JointVector, qd: &JointVector, qdd: &JointVecto
         for j in 0..ch.n {
             tau[i] += m[(i, j)] * qdd[j];
         }
-        let jc = &robot.consts[i];
-        tau[i] += friction(jc.viscous, jc.coulomb, qd[i]);
+        let joint = &robot.joints()[i];
+        tau[i] += friction(joint.viscous_friction, joint.coulomb_friction, qd[i]);
     }
     tau
 }

@@ -39,6 +39,7 @@
 
 mod data;
 pub mod dynamics;
+mod general;
 pub mod ik;
 mod isa;
 pub mod kinematics;
@@ -58,7 +59,10 @@ pub use kinematics::{
     rank, smallest_singular_value, tool_pose,
 };
 pub use math::Pose;
-pub use robot::{DhParameters, Joint, JointKind, JointLimits, LinkInertia, Robot, RobotError};
+pub use robot::{
+    DhParameters, Joint, JointKind, JointLimits, JointPlacement, LinkFrame, LinkInertia, Robot,
+    RobotError,
+};
 pub use robot_file::RobotFileError;
 
 /// Largest number of joints a [`Robot`] may have; fixes the size of every

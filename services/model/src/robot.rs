@@ -1,19 +1,33 @@
-//! The immutable robot model: joints with DH parameters, limits, link inertia,
-//! actuator and friction data, the tool frame and payload, plus the compact
-//! per-joint constants that the hot-path algorithms read.
+//! The immutable robot model: joints placed by DH rows or by general placements
+//! (URDF-style), limits, link inertia, actuator and friction data, the tool frame
+//! and payload, plus the compact per-joint constants that the hot-path algorithms
+//! read.
 
 use crate::MAX_JOINTS;
 use crate::math::Pose;
 use nalgebra::{Matrix3, Vector3};
 
 /// Joint type: the joint variable `q` is added to DH `theta` (revolute, rad) or
-/// to DH `d` (prismatic, m).
+/// to DH `d` (prismatic, m); for a placed joint ([`JointPlacement`]) it is the
+/// angle about (rad) or the distance along (m) the joint axis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum JointKind {
-    /// Rotation about `z_{i-1}`.
+    /// Rotation about `z_{i-1}` (DH) or the joint axis.
     Revolute,
-    /// Translation along `z_{i-1}`.
+    /// Translation along `z_{i-1}` (DH) or the joint axis.
     Prismatic,
+}
+
+/// General joint geometry (URDF `<joint>`): frame `i` = frame `i-1` · `origin` ·
+/// motion, the motion being a rotation by `q` about `axis` (revolute) or a
+/// translation by `q · axis` (prismatic), `axis` a unit vector in the frame that
+/// `origin` places. Frame `i` is the joint's child link frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct JointPlacement {
+    /// Constant placement of the joint frame in the parent frame (frame `i-1`).
+    pub origin: Pose,
+    /// Unit joint axis in the joint frame.
+    pub axis: Vector3<f64>,
 }
 
 /// Constant part of a standard DH row, SI (rad, m): `T = Rz(theta) Tz(d) Tx(a) Rx(alpha)`.
@@ -60,7 +74,8 @@ impl JointLimits {
 
 /// Rigid-body inertia of one link (or the payload): mass (kg), centre of mass
 /// (m) and inertia tensor about the centre of mass (kg·m²), both in the link's
-/// own DH frame `i` (the frame at the end of link `i`).
+/// own frame `i` (DH: the frame at the end of link `i`; placed joints: the joint's
+/// child link frame).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LinkInertia {
     /// Mass, kg.
@@ -127,8 +142,11 @@ pub struct Joint {
     pub name: String,
     /// Revolute or prismatic.
     pub kind: JointKind,
-    /// Constant DH parameters.
+    /// Constant DH parameters (all zero, and unused, for a placed joint).
     pub dh: DhParameters,
+    /// General placement instead of the DH row (`None`: the DH row places the
+    /// joint). A robot's joints are either all DH or all placed.
+    pub placement: Option<JointPlacement>,
     /// Position, rate and effort limits.
     pub limits: JointLimits,
     /// Inertia of link `i` (without payload).
@@ -177,6 +195,32 @@ pub enum RobotError {
         /// Number of joints given.
         got: usize,
     },
+    /// Some joints have a DH row and others a placement.
+    #[error(
+        "joint \"{joint}\" mixes DH rows and placements: a robot's joints are all one or the other"
+    )]
+    MixedGeometry {
+        /// The first joint of the other kind.
+        joint: String,
+    },
+    /// A placed joint's axis is zero or not finite.
+    #[error("joint \"{joint}\": the axis must be a finite non-zero vector")]
+    BadAxis {
+        /// The joint.
+        joint: String,
+    },
+}
+
+/// A named frame rigidly attached to one of the robot's frames (URDF: every
+/// link on the base→tip path, including those merged by fixed joints).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinkFrame {
+    /// Link name.
+    pub name: String,
+    /// Index of the frame it is attached to (0: the base, `i`: joint `i`'s frame).
+    pub frame: usize,
+    /// Its pose in that frame.
+    pub offset: Pose,
 }
 
 /// DH twist `alpha` classified: exactly 0 or ±90° (to 1e-12 rad, where the
@@ -289,6 +333,41 @@ pub(crate) struct JointConst {
     pub coulomb: f64,
 }
 
+/// Per-joint constants of a placed joint ([`JointPlacement`]), SI.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PlacedConst {
+    pub revolute: bool,
+    /// Placement rotation and translation (frame `i-1` → joint frame).
+    pub rot: Matrix3<f64>,
+    pub pos: Vector3<f64>,
+    /// Unit axis in the joint frame (= in frame `i`: the motion keeps it).
+    pub axis: Vector3<f64>,
+    /// `axis axisᵀ`, for Rodrigues' formula.
+    pub axis_outer: Matrix3<f64>,
+    /// `R_placement · axis`: a prismatic joint's direction in frame `i-1`.
+    pub rot_axis: Vector3<f64>,
+    pub rotor: f64,
+    pub viscous: f64,
+    pub coulomb: f64,
+}
+
+impl Default for PlacedConst {
+    fn default() -> Self {
+        let z = Vector3::z();
+        PlacedConst {
+            revolute: true,
+            rot: Matrix3::identity(),
+            pos: Vector3::zeros(),
+            axis: z,
+            axis_outer: z * z.transpose(),
+            rot_axis: z,
+            rotor: 0.0,
+            viscous: 0.0,
+            coulomb: 0.0,
+        }
+    }
+}
+
 /// Body `i` (link plus, for the last one, the payload) in frame `i`, in the forms
 /// the algorithms need: about the centre of mass and about the frame origin.
 #[derive(Clone, Copy, Debug)]
@@ -350,6 +429,13 @@ pub struct Robot {
     pub(crate) plain: bool,
     pub(crate) consts: [JointConst; MAX_JOINTS],
     pub(crate) bodies: [Body; MAX_JOINTS],
+    /// The joints are placed ([`JointPlacement`]), not DH rows: the algorithms
+    /// take the general path (`crate::general`) with `placed`.
+    pub(crate) general: bool,
+    pub(crate) placed: [PlacedConst; MAX_JOINTS],
+    links: Vec<LinkFrame>,
+    missing_limits: Vec<String>,
+    warnings: Vec<String>,
 }
 
 impl Robot {
@@ -368,9 +454,36 @@ impl Robot {
         if dof == 0 || dof > MAX_JOINTS {
             return Err(RobotError::JointCount { got: dof });
         }
+        let general = joints[0].placement.is_some();
+        if let Some(j) = joints.iter().find(|j| j.placement.is_some() != general) {
+            return Err(RobotError::MixedGeometry {
+                joint: j.name.clone(),
+            });
+        }
         let mut consts = [JointConst::default(); MAX_JOINTS];
         let mut bodies = [Body::default(); MAX_JOINTS];
+        let mut placed = [PlacedConst::default(); MAX_JOINTS];
         for (i, j) in joints.iter().enumerate() {
+            if let Some(p) = &j.placement {
+                let norm = p.axis.norm();
+                if !(norm.is_finite() && norm > 0.0) {
+                    return Err(RobotError::BadAxis {
+                        joint: j.name.clone(),
+                    });
+                }
+                let axis = p.axis / norm;
+                placed[i] = PlacedConst {
+                    revolute: j.kind == JointKind::Revolute,
+                    rot: p.origin.rotation,
+                    pos: p.origin.translation,
+                    axis,
+                    axis_outer: axis * axis.transpose(),
+                    rot_axis: p.origin.rotation * axis,
+                    rotor: j.rotor_inertia,
+                    viscous: j.viscous_friction,
+                    coulomb: j.coulomb_friction,
+                };
+            }
             let twist = Twist::of(j.dh.alpha);
             let (ca, sa) = (twist.cos(j.dh.alpha), twist.sin(j.dh.alpha));
             let revolute = j.kind == JointKind::Revolute;
@@ -401,10 +514,11 @@ impl Robot {
             bodies[i] = Body::from_link(&link);
         }
         let tool_is_identity = tool == Pose::IDENTITY;
-        let plain = (0..dof).all(|i| {
-            let jc = &consts[i];
-            jc.revolute && jc.viscous == 0.0 && jc.coulomb == 0.0 && bodies[i].diagonal
-        });
+        let plain = !general
+            && (0..dof).all(|i| {
+                let jc = &consts[i];
+                jc.revolute && jc.viscous == 0.0 && jc.coulomb == 0.0 && bodies[i].diagonal
+            });
         Ok(Robot {
             name: name.into(),
             gravity,
@@ -416,7 +530,52 @@ impl Robot {
             plain,
             consts,
             bodies,
+            general,
+            placed,
+            links: Vec::new(),
+            missing_limits: Vec::new(),
+            warnings: Vec::new(),
         })
+    }
+
+    /// Attaches what a robot file adds beyond the chain: named link frames,
+    /// the limit keys it lacks, and load warnings.
+    pub(crate) fn with_file_info(
+        mut self,
+        links: Vec<LinkFrame>,
+        missing_limits: Vec<String>,
+        warnings: Vec<String>,
+    ) -> Robot {
+        self.links = links;
+        self.missing_limits = missing_limits;
+        self.warnings = warnings;
+        self
+    }
+
+    /// Whether the joints are placed ([`JointPlacement`], e.g. from a URDF) rather
+    /// than DH rows.
+    pub fn is_placed(&self) -> bool {
+        self.general
+    }
+
+    /// Named link frames (URDF robots: every link on the base→tip path; empty
+    /// for DH robots). Pose in the base frame: `data.frame(l.frame) · l.offset`.
+    pub fn links(&self) -> &[LinkFrame] {
+        &self.links
+    }
+
+    /// The robot-file keys of rate limits the file did not give (e.g.
+    /// `joints.panda_joint1.acc_deg_s2` for a URDF without an overlay); those
+    /// limits are NaN. The model works without them; a motion tool must refuse
+    /// the robot and name these keys.
+    pub fn missing_limits(&self) -> &[String] {
+        &self.missing_limits
+    }
+
+    /// Warnings from loading (e.g. an inertia tensor whose principal moments
+    /// break the triangle inequality); the robot loaded regardless.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// Robot name from the file.
@@ -439,7 +598,7 @@ impl Robot {
         self.gravity
     }
 
-    /// Fixed transform from the last DH frame to the tool frame.
+    /// Fixed transform from the last joint frame to the tool frame.
     pub fn tool(&self) -> &Pose {
         &self.tool
     }
@@ -489,6 +648,13 @@ impl Robot {
         // The joint count is unchanged, so assembling cannot fail; keep the
         // original rather than panic if it ever did.
         Robot::new(self.name.clone(), self.gravity, joints, self.tool, payload)
+            .map(|r| {
+                r.with_file_info(
+                    self.links.clone(),
+                    self.missing_limits.clone(),
+                    self.warnings.clone(),
+                )
+            })
             .unwrap_or_else(|_| self.clone())
     }
 }

@@ -1,12 +1,17 @@
-//! Robot description files (docs/seed-arm.md, "Robot description"): TOML text to
-//! [`Robot`], every key checked, units converted once (mm → m, deg → rad,
-//! kg·mm² → kg·m²). Errors name the file and the full key path.
+//! Robot description files: DH robot files (docs/seed-arm.md, "Robot description"),
+//! URDF files, and TOML overlays that name a URDF and add what it lacks. TOML
+//! text to [`Robot`], every key checked, units converted once (mm → m, deg →
+//! rad, kg·mm² → kg·m²). Errors name the file and the full key path (URDF: the
+//! element and its joint or link, `joint[panda_joint4].axis`).
+
+mod urdf;
 
 use crate::MAX_JOINTS;
 use crate::math::Pose;
 use crate::robot::{DhParameters, Joint, JointKind, JointLimits, LinkInertia, Robot};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use std::path::Path;
+use std::path::PathBuf;
 use toml::{Table, Value};
 
 /// Why a robot file was refused. Every variant names the file (`origin`) and,
@@ -28,6 +33,15 @@ pub enum RobotFileError {
         /// File name.
         file: String,
         /// Parser message (with line and column).
+        message: String,
+    },
+    /// Not a URDF document `urdf-rs` can read (XML syntax, a missing required
+    /// attribute, a wrong number of values).
+    #[error("{file}: invalid URDF: {message}")]
+    UrdfSyntax {
+        /// File name.
+        file: String,
+        /// Parser message.
         message: String,
     },
     /// A required key is absent.
@@ -84,7 +98,7 @@ impl RobotFileError {
     /// The key path the error is about (`None` for I/O and syntax errors).
     pub fn key(&self) -> Option<&str> {
         match self {
-            Self::Io { .. } | Self::Syntax { .. } => None,
+            Self::Io { .. } | Self::Syntax { .. } | Self::UrdfSyntax { .. } => None,
             Self::MissingKey { key, .. }
             | Self::UnknownKey { key, .. }
             | Self::WrongType { key, .. }
@@ -99,30 +113,86 @@ const KGMM2: f64 = 1.0e-6;
 const DEG: f64 = std::f64::consts::PI / 180.0;
 
 impl Robot {
-    /// Parses a robot description (the format of docs/seed-arm.md). `origin` is the file name
-    /// used in error messages.
+    /// Parses a DH robot description (the format of docs/seed-arm.md). `origin` is the
+    /// file name used in error messages. An overlay (`[robot] urdf = …`) names a file
+    /// relative to itself: load it with [`Robot::from_file`].
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Robot, RobotFileError> {
-        let table: Table = text
-            .parse()
-            .map_err(|e: toml::de::Error| RobotFileError::Syntax {
-                file: origin.to_string(),
-                message: e.to_string().trim().to_string(),
-            })?;
-        Reader { file: origin }.robot(&table)
+        let table = parse_toml(text, origin)?;
+        let reader = Reader { file: origin };
+        if is_overlay(&table) {
+            return Err(reader.invalid(
+                "robot.urdf".into(),
+                "an overlay names its URDF relative to itself: load it with Robot::from_file"
+                    .into(),
+            ));
+        }
+        reader.robot(&table)
     }
 
-    /// Reads and parses a robot file; errors name the file by its file name.
-    pub fn from_file(path: &Path) -> Result<Robot, RobotFileError> {
-        let origin = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| path.display().to_string());
-        let text = std::fs::read_to_string(path).map_err(|source| RobotFileError::Io {
-            file: origin.clone(),
-            source,
-        })?;
-        Robot::from_toml_str(&text, &origin)
+    /// Parses a URDF robot (`origin`: the file name for errors) with the
+    /// defaults: the chain from the root link to the child of the last moving
+    /// joint, gravity 9.81 m/s² along −z of the base, no rotor inertia, the tool
+    /// frame at the tip link. Acceleration and jerk limits are NaN and listed by
+    /// [`Robot::missing_limits`].
+    pub fn from_urdf_str(text: &str, origin: &str) -> Result<Robot, RobotFileError> {
+        let sel = urdf::Selection {
+            base_link: None,
+            tip_link: None,
+            lock: &[],
+            overlay: origin,
+        };
+        let chain = urdf::load(text, origin, &sel)?;
+        let reader = Reader { file: origin };
+        reader.assemble_urdf(chain, &Table::new(), Pose::IDENTITY, None, None)
     }
+
+    /// Reads a robot file: a `.urdf`, an overlay (a TOML file with
+    /// `[robot] urdf = …`), or a DH robot file. Errors name the file by its
+    /// file name.
+    pub fn from_file(path: &Path) -> Result<Robot, RobotFileError> {
+        let (origin, text) = read_text(path)?;
+        let is_urdf = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("urdf"));
+        if is_urdf {
+            return Robot::from_urdf_str(&text, &origin);
+        }
+        let table = parse_toml(&text, &origin)?;
+        let reader = Reader { file: &origin };
+        if is_overlay(&table) {
+            let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+            reader.overlay(&table, &dir)
+        } else {
+            reader.robot(&table)
+        }
+    }
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| path.display().to_string())
+}
+
+fn read_text(path: &Path) -> Result<(String, String), RobotFileError> {
+    let origin = file_name(path);
+    let text = std::fs::read_to_string(path).map_err(|source| RobotFileError::Io {
+        file: origin.clone(),
+        source,
+    })?;
+    Ok((origin, text))
+}
+
+fn parse_toml(text: &str, origin: &str) -> Result<Table, RobotFileError> {
+    text.parse()
+        .map_err(|e: toml::de::Error| RobotFileError::Syntax {
+            file: origin.to_string(),
+            message: e.to_string().trim().to_string(),
+        })
+}
+
+fn is_overlay(table: &Table) -> bool {
+    matches!(table.get("robot"), Some(Value::Table(t)) if t.contains_key("urdf"))
 }
 
 fn join(path: &str, key: &str) -> String {
@@ -322,6 +392,29 @@ impl Reader<'_> {
             joints.push(joint);
         }
 
+        let (tool, payload) = self.tool_and_payload(root)?;
+        let warnings = joints
+            .iter()
+            .enumerate()
+            .filter_map(|(i, j)| {
+                urdf::triangle_warning(&j.link.inertia)
+                    .map(|w| format!("{}: joints[{i}].link.inertia_kgmm2: {w}", self.file))
+            })
+            .collect();
+        Robot::new(name, gravity, joints, tool, payload)
+            .map(|r| r.with_file_info(Vec::new(), Vec::new(), warnings))
+            .map_err(|e| self.invalid("joints".into(), e.to_string()))
+    }
+
+    fn opt_string<'t>(&self, t: &'t Table, path: &str, key: &str) -> Res<Option<&'t str>> {
+        match t.get(key) {
+            None => Ok(None),
+            Some(_) => self.string(t, path, key).map(Some),
+        }
+    }
+
+    /// `[tool]` (`xyz_mm`, `rpy_deg`) and `[payload]` of a DH file or an overlay.
+    fn tool_and_payload(&self, root: &Table) -> Res<(Pose, Option<LinkInertia>)> {
         let tool = match self.opt_table(root, "", "tool")? {
             None => Pose::IDENTITY,
             Some(t) => {
@@ -338,7 +431,149 @@ impl Reader<'_> {
                 Some(self.inertia(t, "payload")?)
             }
         };
-        Robot::new(name, gravity, joints, tool, payload)
+        Ok((tool, payload))
+    }
+
+    /// An overlay: `[robot]` `urdf` (relative to the overlay), optional
+    /// `name`, `base_link`, `tip_link`, `gravity_mps2`; `[joints.NAME]` limits,
+    /// actuator and friction values in the DH files' units; `[lock]` positions
+    /// (rad or m, as in URDF) of joints off the path; `[tool]`, `[payload]`.
+    fn overlay(&self, root: &Table, dir: &Path) -> Res<Robot> {
+        self.check_keys(root, "", &["robot", "joints", "lock", "tool", "payload"])?;
+        let head = self.table(root, "", "robot")?;
+        self.check_keys(
+            head,
+            "robot",
+            &["urdf", "name", "base_link", "tip_link", "gravity_mps2"],
+        )?;
+        let urdf_rel = self.string(head, "robot", "urdf")?;
+        let base_link = self.opt_string(head, "robot", "base_link")?;
+        let tip_link = self.opt_string(head, "robot", "tip_link")?;
+        let name = self.opt_string(head, "robot", "name")?;
+        if name.is_some_and(|n| n.trim().is_empty()) {
+            return Err(self.invalid("robot.name".into(), "must not be empty".into()));
+        }
+        let gravity = match head.get("gravity_mps2") {
+            None => None,
+            Some(_) => Some(self.vec3(head, "robot", "gravity_mps2")?),
+        };
+        let mut lock = Vec::new();
+        if let Some(t) = self.opt_table(root, "", "lock")? {
+            for (k, v) in t {
+                lock.push((k.clone(), self.value_number(v, join("lock", k))?));
+            }
+        }
+        let urdf_path: PathBuf = dir.join(urdf_rel);
+        let text = std::fs::read_to_string(&urdf_path).map_err(|e| {
+            self.invalid(
+                "robot.urdf".into(),
+                format!("cannot read {}: {e}", urdf_path.display()),
+            )
+        })?;
+        let urdf_name = file_name(&urdf_path);
+        let sel = urdf::Selection {
+            base_link,
+            tip_link,
+            lock: &lock,
+            overlay: self.file,
+        };
+        let mut chain = urdf::load(&text, &urdf_name, &sel)?;
+        if let Some(n) = name {
+            chain.name = n.to_string();
+        }
+        let joints_t = self
+            .opt_table(root, "", "joints")?
+            .cloned()
+            .unwrap_or_default();
+        let (tool, payload) = self.tool_and_payload(root)?;
+        self.assemble_urdf(chain, &joints_t, tool, payload, gravity)
+    }
+
+    /// The robot from a URDF chain and the overlay's `[joints]` table (empty for
+    /// a bare URDF); limits still missing are listed by their overlay keys.
+    fn assemble_urdf(
+        &self,
+        mut chain: urdf::UrdfChain,
+        joints_t: &Table,
+        tool: Pose,
+        payload: Option<LinkInertia>,
+        gravity: Option<Vector3<f64>>,
+    ) -> Res<Robot> {
+        let names: Vec<&str> = chain.joints.iter().map(|j| j.name.as_str()).collect();
+        for k in joints_t.keys() {
+            if !names.contains(&k.as_str()) {
+                return Err(RobotFileError::UnknownKey {
+                    file: self.file.to_string(),
+                    key: join("joints", k),
+                    expected: format!("a moving joint on the path: {}", names.join(", ")),
+                });
+            }
+        }
+        let mut missing = Vec::new();
+        for joint in &mut chain.joints {
+            let path = join("joints", &joint.name);
+            let revolute = joint.kind == JointKind::Revolute;
+            let keys: [&str; 8] = if revolute {
+                [
+                    "vel_deg_s",
+                    "acc_deg_s2",
+                    "jerk_deg_s3",
+                    "torque_nm",
+                    "rotor_inertia_kgmm2",
+                    "gear_ratio",
+                    "viscous_friction_nms",
+                    "coulomb_friction_nm",
+                ]
+            } else {
+                [
+                    "vel_mm_s",
+                    "acc_mm_s2",
+                    "jerk_mm_s3",
+                    "force_n",
+                    "rotor_mass_kg",
+                    "gear_ratio",
+                    "viscous_friction_nsm",
+                    "coulomb_friction_n",
+                ]
+            };
+            let unit = if revolute { DEG } else { MM };
+            if let Some(t) = self.opt_table(joints_t, "joints", &joint.name)? {
+                self.check_keys(t, &path, &keys)?;
+                let l = &mut joint.limits;
+                for (k, slot, scale) in [
+                    (keys[0], &mut l.velocity, unit),
+                    (keys[1], &mut l.acceleration, unit),
+                    (keys[2], &mut l.jerk, unit),
+                    (keys[3], &mut l.effort, 1.0),
+                ] {
+                    if t.contains_key(k) {
+                        *slot = self.positive(t, &path, k)? * scale;
+                    }
+                }
+                let rotor_scale = if revolute { KGMM2 } else { 1.0 };
+                joint.rotor_inertia =
+                    self.non_negative(t, &path, keys[4], Some(0.0))? * rotor_scale;
+                if t.contains_key(keys[5]) {
+                    joint.gear_ratio = self.positive(t, &path, keys[5])?;
+                }
+                let (v, c) = (joint.viscous_friction, joint.coulomb_friction);
+                joint.viscous_friction = self.non_negative(t, &path, keys[6], Some(v))?;
+                joint.coulomb_friction = self.non_negative(t, &path, keys[7], Some(c))?;
+            }
+            let l = &joint.limits;
+            for (k, v) in keys[..4]
+                .iter()
+                .zip([l.velocity, l.acceleration, l.jerk, l.effort])
+            {
+                if v.is_nan() {
+                    missing.push(join(&path, k));
+                }
+            }
+        }
+        let gravity = gravity.unwrap_or(Vector3::new(0.0, 0.0, -9.81));
+        let tool = chain.tip.compose(&tool);
+        Robot::new(chain.name, gravity, chain.joints, tool, payload)
+            .map(|r| r.with_file_info(chain.links, missing, chain.warnings))
             .map_err(|e| self.invalid("joints".into(), e.to_string()))
     }
 
@@ -456,6 +691,7 @@ impl Reader<'_> {
             name,
             kind,
             dh,
+            placement: None,
             limits,
             link,
             rotor_inertia,

@@ -15,9 +15,16 @@ use counting_alloc::allocations;
 
 #[test]
 fn hot_path_allocates_nothing() {
-    for file in ["seed-arm.toml", "spherical-rrp.toml", "planar-2r.toml"] {
+    // The DH robots and two URDF robots (placed joints: the general path).
+    for file in [
+        "config/robots/seed-arm.toml",
+        "config/robots/spherical-rrp.toml",
+        "config/robots/planar-2r.toml",
+        "tests/reference/urdf/panda.toml",
+        "tests/reference/urdf/test_arm.toml",
+    ] {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../config/robots")
+            .join("../..")
             .join(file);
         let robot = Robot::from_file(&path).unwrap_or_else(|e| panic!("{e}"));
         let mut data = ModelData::new(&robot);

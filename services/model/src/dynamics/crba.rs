@@ -112,6 +112,9 @@ pub(crate) fn mass_matrix_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> MassMatrix {
+    if robot.general {
+        return crate::general::mass_matrix::<S>(robot, data, q);
+    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         mass_matrix_from_joint_values(robot, data, n, plain)

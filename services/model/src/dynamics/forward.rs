@@ -77,6 +77,9 @@ pub(crate) fn try_forward_dynamics_with<S: Isa>(
     qd: &JointVector,
     tau: &JointVector,
 ) -> Result<JointVector, DynamicsError> {
+    if robot.general {
+        return crate::general::try_forward_dynamics::<S>(robot, data, q, qd, tau);
+    }
     for_shape!(robot, |n, plain| solve_forward_dynamics::<S>(
         robot, data, q, qd, tau, n, plain
     ))
@@ -118,7 +121,24 @@ fn solve_forward_dynamics<S: Isa>(
     for i in 0..n {
         x[i] = tau[i] - h[i];
     }
-    // L y = x, D z = y, Lᵀ qdd = z.
+    solve_ldlt(n, &a, &inv_pivot, &mut x);
+    let mut qdd = JointVector::zeros();
+    for i in 0..n {
+        qdd[i] = x[i];
+    }
+    Ok(qdd)
+}
+
+/// Solves `L D Lᵀ y = x` in place with the factors of [`factor_ldlt`]:
+/// `L y = x`, `D z = y`, `Lᵀ qdd = z`.
+#[inline(always)]
+pub(crate) fn solve_ldlt(
+    n: usize,
+    a: &Square,
+    inv_pivot: &[f64; MAX_JOINTS],
+    x: &mut [f64; MAX_JOINTS],
+) {
+    let n = n.min(MAX_JOINTS);
     for i in 0..n {
         let mut v = x[i];
         for k in 0..i {
@@ -133,15 +153,10 @@ fn solve_forward_dynamics<S: Isa>(
         }
         x[i] = v;
     }
-    let mut qdd = JointVector::zeros();
-    for i in 0..n {
-        qdd[i] = x[i];
-    }
-    Ok(qdd)
 }
 
 /// An `n × n` block in the top left, `n <= MAX_JOINTS`, row by row.
-type Square = [[f64; MAX_JOINTS]; MAX_JOINTS];
+pub(crate) type Square = [[f64; MAX_JOINTS]; MAX_JOINTS];
 
 /// `M = L D Lᵀ` in place (`L` unit lower triangular) of the symmetric block
 /// `a`: `L` below the diagonal, `D` on it, `L D` (transposed) above it; returns
@@ -151,7 +166,7 @@ type Square = [[f64; MAX_JOINTS]; MAX_JOINTS];
 /// (numerically) positive definite.
 #[inline(always)]
 #[allow(clippy::needless_range_loop)] // index loops read like the matrix formulas
-fn factor_ldlt(n: usize, a: &mut Square) -> Result<[f64; MAX_JOINTS], DynamicsError> {
+pub(crate) fn factor_ldlt(n: usize, a: &mut Square) -> Result<[f64; MAX_JOINTS], DynamicsError> {
     let n = n.min(MAX_JOINTS);
     let mut scale = 0.0_f64;
     for j in 0..n {

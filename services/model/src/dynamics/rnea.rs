@@ -29,6 +29,9 @@ pub(crate) fn rnea_with<S: Isa>(
     qd: &JointVector,
     qdd: &JointVector,
 ) -> JointVector {
+    if robot.general {
+        return crate::general::rnea::<S>(robot, data, q, qd, qdd, ALL);
+    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         rnea_from_joint_values(robot, data, qd, qdd, ALL, n, plain)
@@ -42,6 +45,9 @@ pub(crate) fn nonlinear_effects_with<S: Isa>(
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
+    if robot.general {
+        return crate::general::rnea::<S>(robot, data, q, qd, &JointVector::zeros(), ALL);
+    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), ALL, n, plain)
@@ -54,13 +60,16 @@ pub(crate) fn gravity_torque_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> JointVector {
+    let zero = JointVector::zeros();
+    let terms = RneaTerms {
+        gravity: true,
+        friction: false,
+    };
+    if robot.general {
+        return crate::general::rnea::<S>(robot, data, q, &zero, &zero, terms);
+    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
-        let zero = JointVector::zeros();
-        let terms = RneaTerms {
-            gravity: true,
-            friction: false,
-        };
         rnea_from_joint_values(robot, data, &zero, &zero, terms, n, plain)
     })
 }
@@ -72,12 +81,16 @@ pub(crate) fn coriolis_torque_with<S: Isa>(
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
+    let terms = RneaTerms {
+        gravity: false,
+        friction: false,
+    };
+    if robot.general {
+        let zero = JointVector::zeros();
+        return crate::general::rnea::<S>(robot, data, q, qd, &zero, terms);
+    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
-        let terms = RneaTerms {
-            gravity: false,
-            friction: false,
-        };
         rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), terms, n, plain)
     })
 }

@@ -179,3 +179,184 @@ pub fn jv(robot: &Robot, a: &[f64; 8], position: bool) -> JointVector {
 pub fn scale(v: &JointVector, n: usize) -> f64 {
     (0..n).map(|i| v[i].abs()).fold(0.0, f64::max)
 }
+
+/// One random placed joint (URDF-style), SI units: origin xyz (m) and rpy
+/// (rad), an axis (normalised by the model), inertia as for [`JointSpec`].
+#[derive(Clone, Debug)]
+pub struct PlacedJointSpec {
+    pub prismatic: bool,
+    pub xyz: [f64; 3],
+    pub rpy: [f64; 3],
+    pub axis: [f64; 3],
+    pub mass: f64,
+    pub com: [f64; 3],
+    pub a: [f64; 9],
+    pub rotor: f64,
+    pub viscous: f64,
+    pub coulomb: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct PlacedSpec {
+    pub gravity: [f64; 3],
+    pub joints: Vec<PlacedJointSpec>,
+    pub tool: ([f64; 3], [f64; 3]),
+}
+
+pub fn placed_spec(max_joints: usize) -> impl Strategy<Value = PlacedSpec> {
+    let joint = (
+        prop::bool::weighted(0.3),
+        arr3(-0.3..0.3),
+        arr3(-3.2..3.2),
+        arr3(-1.0..1.0),
+        0.05..5.0f64,
+        arr3(-0.15..0.15),
+        prop::array::uniform9(-0.06..0.06f64),
+        (0.0..0.002f64, 0.0..0.5f64, 0.0..0.3f64),
+    )
+        .prop_map(
+            |(prismatic, xyz, rpy, axis, mass, com, a, (rotor, viscous, coulomb))| {
+                PlacedJointSpec {
+                    prismatic,
+                    xyz,
+                    rpy,
+                    axis,
+                    mass,
+                    com,
+                    a,
+                    rotor,
+                    viscous,
+                    coulomb,
+                }
+            },
+        );
+    (
+        arr3(-10.0..10.0),
+        prop::collection::vec(joint, 1..=max_joints),
+        (arr3(-0.1..0.1), arr3(-3.2..3.2)),
+    )
+        .prop_map(|(gravity, joints, tool)| PlacedSpec {
+            gravity,
+            joints,
+            tool,
+        })
+}
+
+fn pose(xyz: &[f64; 3], rpy: &[f64; 3]) -> microrobot_model::Pose {
+    microrobot_model::Pose::from_xyz_rpy(
+        nalgebra::Vector3::from(*xyz),
+        nalgebra::Vector3::from(*rpy),
+    )
+}
+
+/// The robot of a [`PlacedSpec`], assembled with `Robot::new`.
+pub fn build_placed(spec: &PlacedSpec) -> Robot {
+    use microrobot_model::{
+        DhParameters, Joint, JointKind, JointLimits, JointPlacement, LinkInertia,
+    };
+    use nalgebra::{Matrix3, Vector3};
+    let joints = spec
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(i, j)| {
+            let a = Matrix3::from_row_slice(&j.a);
+            let mut axis = Vector3::from(j.axis);
+            if axis.norm() < 0.1 {
+                axis = Vector3::z();
+            }
+            Joint {
+                name: format!("j{i}"),
+                kind: if j.prismatic {
+                    JointKind::Prismatic
+                } else {
+                    JointKind::Revolute
+                },
+                dh: DhParameters {
+                    theta: 0.0,
+                    d: 0.0,
+                    a: 0.0,
+                    alpha: 0.0,
+                },
+                placement: Some(JointPlacement {
+                    origin: pose(&j.xyz, &j.rpy),
+                    axis,
+                }),
+                // A full turn (inverse kinematics wraps such joints), ±0.3 m.
+                limits: JointLimits {
+                    min: if j.prismatic {
+                        -0.3
+                    } else {
+                        -std::f64::consts::PI
+                    },
+                    max: if j.prismatic {
+                        0.3
+                    } else {
+                        std::f64::consts::PI
+                    },
+                    velocity: 1.0,
+                    acceleration: 1.0,
+                    jerk: 1.0,
+                    effort: 1.0,
+                },
+                link: LinkInertia {
+                    mass: j.mass,
+                    com: Vector3::from(j.com),
+                    inertia: a * a.transpose() + Matrix3::identity() * 1e-5,
+                },
+                rotor_inertia: j.rotor,
+                gear_ratio: 1.0,
+                viscous_friction: j.viscous,
+                coulomb_friction: j.coulomb,
+            }
+        })
+        .collect();
+    Robot::new(
+        "placed",
+        nalgebra::Vector3::from(spec.gravity),
+        joints,
+        pose(&spec.tool.0, &spec.tool.1),
+        None,
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The same robot as a DH robot, with every joint placed instead: frame `i` of
+/// the placed robot is DH frame `i-1` turned by joint `i`'s motion,
+/// `⁰T_{i-1} M_i(q)`, so joint `i`'s placement is DH row `i-1`'s constant part
+/// `Rz(θ) Tz(d) Tx(a) Rx(α)` (the identity for the first), each link's inertia
+/// moves by its own row's constant part, and so does the tool.
+pub fn to_placed(robot: &Robot) -> Robot {
+    use microrobot_model::{JointPlacement, Pose};
+    use nalgebra::{Rotation3, Vector3};
+    let constant = |j: &microrobot_model::Joint| {
+        let dh = &j.dh;
+        let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), dh.theta);
+        let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), dh.alpha);
+        Pose {
+            rotation: (rz * rx).into_inner(),
+            translation: Vector3::new(0.0, 0.0, dh.d) + rz * Vector3::new(dh.a, 0.0, 0.0),
+        }
+    };
+    let mut previous = Pose::IDENTITY;
+    let mut joints = Vec::new();
+    for j in robot.joints() {
+        let c = constant(j);
+        let mut placed = j.clone();
+        placed.placement = Some(JointPlacement {
+            origin: previous,
+            axis: Vector3::z(),
+        });
+        placed.link = j.link.transformed(&c);
+        joints.push(placed);
+        previous = c;
+    }
+    Robot::new(
+        robot.name(),
+        robot.gravity(),
+        joints,
+        previous.compose(robot.tool()),
+        robot.payload().copied(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+}
