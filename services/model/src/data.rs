@@ -56,7 +56,8 @@ impl ModelData {
         }
     }
 
-    /// Pose of frame `i` (DH frame `i`, or placed joint `i`'s child link frame) in the base frame after the last kinematics call
+    /// Pose of frame `i` (DH frame `i`, or placed joint `i`'s child link frame)
+    /// in the base frame after the last kinematics call
     /// ([`crate::forward_kinematics`], [`crate::jacobian`], [`crate::tool_pose`]):
     /// `frame(0)` is the base, `frame(dof)` the last joint frame. Indices beyond
     /// [`MAX_JOINTS`] give the identity.

@@ -157,7 +157,7 @@ multiversion! {
 }
 
 /// Tool pose in the base frame for joint positions `q` (seed eq. 1 chained, then
-/// the tool transform). Every DH frame is left in `data` ([`ModelData::frame`]);
+/// the tool transform). Every joint frame is left in `data` ([`ModelData::frame`]);
 /// [`ModelData::tool_frame`] gives the same pose as a rotation matrix.
 pub fn forward_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Isometry3<f64> {
     if robot.general {
@@ -329,7 +329,7 @@ multiversion! {
     fn tool_pose_dh(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose => tool_pose_with;
 }
 
-/// Pose of every DH frame and the tool; convenience for callers that want the
+/// Pose of every joint frame and the tool; convenience for callers that want the
 /// homogeneous matrices (e.g. the eval interface).
 pub fn tool_pose(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose {
     if robot.general {
