@@ -26,9 +26,6 @@ pub struct ModelData {
     /// Frame poses in the base frame: `frames[0]` is the base, `frames[i]` frame `i`
     /// (DH frame `i`, or joint `i`'s child frame for placed joints).
     pub(crate) frames: [Pose; MAX_JOINTS + 1],
-    /// Placed joints: each joint's transform from frame `i-1` to frame `i`
-    /// (placement, then the motion for `q`).
-    pub(crate) local: [Pose; MAX_JOINTS],
     /// Tool frame in the base frame.
     pub(crate) tool: Pose,
     /// RNEA: body forces and moments (frame `i`, about its origin).
@@ -36,6 +33,9 @@ pub struct ModelData {
     pub(crate) moment: [Vector3<f64>; MAX_JOINTS],
     /// Last mass matrix.
     pub(crate) mass: MassMatrix,
+    /// Placed joints: each joint's transform from frame `i-1` to frame `i`
+    /// (placement, then the motion for `q`).
+    pub(crate) local: [Pose; MAX_JOINTS],
 }
 
 impl ModelData {
@@ -56,7 +56,8 @@ impl ModelData {
         }
     }
 
-    /// Pose of frame `i` (DH frame `i`, or placed joint `i`'s child link frame) in the base frame after the last kinematics call
+    /// Pose of frame `i` (DH frame `i`, or placed joint `i`'s child link frame)
+    /// in the base frame after the last kinematics call
     /// ([`crate::forward_kinematics`], [`crate::jacobian`], [`crate::tool_pose`]):
     /// `frame(0)` is the base, `frame(dof)` the last joint frame. Indices beyond
     /// [`MAX_JOINTS`] give the identity.

@@ -11,16 +11,17 @@
 //! of each frame origin, CRBA (ch. 6.2) with the composite inertia about each
 //! frame origin and the pending columns carried down the chain together. The
 //! DH robots keep their specialised paths; every public entry point branches
-//! here once, on `Robot::general`. Allocation-free like the DH paths.
+//! here once, on `Robot::general`, outside their instruction-set dispatch (so
+//! the DH builds compile exactly as before). Allocation-free like the DH paths.
 
 use crate::data::ModelData;
 use crate::dynamics::forward::{DynamicsError, factor_ldlt, solve_ldlt};
 use crate::dynamics::rnea::RneaTerms;
-use crate::isa::Isa;
+use crate::isa::{Isa, multiversion};
 use crate::math::Pose;
 use crate::robot::{Robot, friction};
 use crate::{Jacobian, JointVector, MAX_JOINTS, MassMatrix};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Vector3};
 
 /// Joint values (`sin`/`cos` of revolute angles, prismatic travel) and each
 /// joint's transform `X_i M_i(q_i)` into `data.local`.
@@ -85,11 +86,44 @@ fn update_frames(robot: &Robot, data: &mut ModelData) {
     };
 }
 
-/// Forward kinematics: every frame and the tool frame for `q`, left in `data`.
-#[inline(never)]
-pub(crate) fn update_kinematics<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) {
+#[inline(always)]
+pub(crate) fn update_kinematics_with<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) {
     update_joint_values::<S>(robot, data, q);
     update_frames(robot, data);
+}
+
+multiversion! {
+    /// Forward kinematics: every frame and the tool frame for `q`, left in `data`.
+    pub(crate) fn update_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector)
+        => update_kinematics_with;
+}
+
+#[inline(always)]
+pub(crate) fn forward_kinematics_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+) -> Isometry3<f64> {
+    update_kinematics_with::<S>(robot, data, q);
+    data.tool.to_isometry()
+}
+
+multiversion! {
+    /// Tool pose for `q` (frames left in `data`).
+    pub(crate) fn forward_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector)
+        -> Isometry3<f64> => forward_kinematics_with;
+}
+
+#[inline(always)]
+pub(crate) fn tool_pose_with<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose {
+    update_kinematics_with::<S>(robot, data, q);
+    data.tool
+}
+
+multiversion! {
+    /// Tool pose for `q` as a [`Pose`] (frames left in `data`).
+    pub(crate) fn tool_pose(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose
+        => tool_pose_with;
 }
 
 /// Geometric Jacobian of the tool origin from the frames in `data`: column `j`
@@ -114,11 +148,20 @@ pub(crate) fn jacobian_from_frames(robot: &Robot, data: &ModelData) -> Jacobian 
     jac
 }
 
-/// Forward kinematics, then the Jacobian.
-#[inline(never)]
-pub(crate) fn jacobian<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Jacobian {
-    update_kinematics::<S>(robot, data, q);
+#[inline(always)]
+pub(crate) fn jacobian_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+) -> Jacobian {
+    update_kinematics_with::<S>(robot, data, q);
     jacobian_from_frames(robot, data)
+}
+
+multiversion! {
+    /// Forward kinematics, then the Jacobian.
+    pub(crate) fn jacobian(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Jacobian
+        => jacobian_with;
 }
 
 /// RNEA on the joint values in `data` (`update_joint_values`).
@@ -192,18 +235,99 @@ fn rnea_from_joint_values(
     tau
 }
 
-/// RNEA for `q`, `qd`, `qdd` with the chosen `terms`.
-#[inline(never)]
-pub(crate) fn rnea<S: Isa>(
+const ALL: RneaTerms = RneaTerms {
+    gravity: true,
+    friction: true,
+};
+
+#[inline(always)]
+pub(crate) fn rnea_with<S: Isa>(
     robot: &Robot,
     data: &mut ModelData,
     q: &JointVector,
     qd: &JointVector,
     qdd: &JointVector,
-    terms: RneaTerms,
 ) -> JointVector {
     update_joint_values::<S>(robot, data, q);
-    rnea_from_joint_values(robot, data, qd, qdd, terms)
+    rnea_from_joint_values(robot, data, qd, qdd, ALL)
+}
+
+#[inline(always)]
+pub(crate) fn nonlinear_effects_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+) -> JointVector {
+    update_joint_values::<S>(robot, data, q);
+    rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), ALL)
+}
+
+#[inline(always)]
+pub(crate) fn gravity_torque_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+) -> JointVector {
+    update_joint_values::<S>(robot, data, q);
+    let zero = JointVector::zeros();
+    let terms = RneaTerms {
+        gravity: true,
+        friction: false,
+    };
+    rnea_from_joint_values(robot, data, &zero, &zero, terms)
+}
+
+#[inline(always)]
+pub(crate) fn coriolis_torque_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+) -> JointVector {
+    update_joint_values::<S>(robot, data, q);
+    let terms = RneaTerms {
+        gravity: false,
+        friction: false,
+    };
+    rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), terms)
+}
+
+multiversion! {
+    /// Inverse dynamics, every term.
+    pub(crate) fn rnea(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+        qdd: &JointVector,
+    ) -> JointVector => rnea_with;
+}
+
+multiversion! {
+    /// `C(q, qd) qd + g(q) + friction(qd)`.
+    pub(crate) fn nonlinear_effects(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+    ) -> JointVector => nonlinear_effects_with;
+}
+
+multiversion! {
+    /// `g(q)`.
+    pub(crate) fn gravity_torque(robot: &Robot, data: &mut ModelData, q: &JointVector)
+        -> JointVector => gravity_torque_with;
+}
+
+multiversion! {
+    /// `C(q, qd) qd`.
+    pub(crate) fn coriolis_torque(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+    ) -> JointVector => coriolis_torque_with;
 }
 
 /// CRBA on the joint values in `data`; result in `data.mass`.
@@ -270,9 +394,8 @@ fn mass_matrix_from_joint_values(robot: &Robot, data: &mut ModelData) {
     }
 }
 
-/// Joint-space mass matrix for `q` (rotor inertia on the diagonal).
-#[inline(never)]
-pub(crate) fn mass_matrix<S: Isa>(
+#[inline(always)]
+pub(crate) fn mass_matrix_with<S: Isa>(
     robot: &Robot,
     data: &mut ModelData,
     q: &JointVector,
@@ -282,9 +405,56 @@ pub(crate) fn mass_matrix<S: Isa>(
     data.mass
 }
 
-/// `M(q)⁻¹ (tau − h(q, qd))` by `L D Lᵀ`.
-#[inline(never)]
-pub(crate) fn try_forward_dynamics<S: Isa>(
+multiversion! {
+    /// Joint-space mass matrix for `q` (rotor inertia on the diagonal).
+    pub(crate) fn mass_matrix(robot: &Robot, data: &mut ModelData, q: &JointVector) -> MassMatrix
+        => mass_matrix_with;
+}
+
+#[inline(always)]
+pub(crate) fn forward_dynamics_with<S: Isa>(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+    tau: &JointVector,
+) -> JointVector {
+    match try_forward_dynamics_with::<S>(robot, data, q, qd, tau) {
+        Ok(qdd) => qdd,
+        Err(_) => {
+            let mut nan = JointVector::zeros();
+            for i in 0..robot.dof.min(MAX_JOINTS) {
+                nan[i] = f64::NAN;
+            }
+            nan
+        }
+    }
+}
+
+multiversion! {
+    /// `M(q)⁻¹ (tau − h(q, qd))`, NaN where `M` is singular.
+    pub(crate) fn forward_dynamics(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+        tau: &JointVector,
+    ) -> JointVector => forward_dynamics_with;
+}
+
+multiversion! {
+    /// `M(q)⁻¹ (tau − h(q, qd))` by `L D Lᵀ`, a singular `M` as an error.
+    pub(crate) fn try_forward_dynamics(
+        robot: &Robot,
+        data: &mut ModelData,
+        q: &JointVector,
+        qd: &JointVector,
+        tau: &JointVector,
+    ) -> Result<JointVector, DynamicsError> => try_forward_dynamics_with;
+}
+
+#[inline(always)]
+pub(crate) fn try_forward_dynamics_with<S: Isa>(
     robot: &Robot,
     data: &mut ModelData,
     q: &JointVector,

@@ -141,6 +141,9 @@ mod tests {
         }
         #[inline(always)]
         fn all<S: super::Isa>(r: &Robot, d: &mut ModelData, s: &[JointVector; 3]) -> Vec<f64> {
+            if r.is_placed() {
+                return all_placed::<S>(r, d, s);
+            }
             let [q, qd, qdd] = s;
             let mut out: Vec<f64> = Vec::new();
             let iso = kinematics::forward_kinematics_with::<S>(r, d, q);
@@ -160,6 +163,30 @@ mod tests {
             out.extend(rnea::coriolis_torque_with::<S>(r, d, q, qd).iter());
             out.extend(crba::mass_matrix_with::<S>(r, d, q).iter());
             out.extend(forward::forward_dynamics_with::<S>(r, d, q, qd, qdd).iter());
+            out
+        }
+        #[inline(always)]
+        fn all_placed<S: super::Isa>(
+            r: &Robot,
+            d: &mut ModelData,
+            s: &[JointVector; 3],
+        ) -> Vec<f64> {
+            use crate::general as g;
+            let [q, qd, qdd] = s;
+            let mut out: Vec<f64> = Vec::new();
+            let iso = g::forward_kinematics_with::<S>(r, d, q);
+            out.extend(iso.to_homogeneous().iter());
+            out.extend(g::jacobian_with::<S>(r, d, q).iter());
+            out.extend(g::tool_pose_with::<S>(r, d, q).to_homogeneous().iter());
+            for i in 0..=r.dof() {
+                out.extend(d.frame(i).to_homogeneous().iter());
+            }
+            out.extend(g::rnea_with::<S>(r, d, q, qd, qdd).iter());
+            out.extend(g::nonlinear_effects_with::<S>(r, d, q, qd).iter());
+            out.extend(g::gravity_torque_with::<S>(r, d, q).iter());
+            out.extend(g::coriolis_torque_with::<S>(r, d, q, qd).iter());
+            out.extend(g::mass_matrix_with::<S>(r, d, q).iter());
+            out.extend(g::forward_dynamics_with::<S>(r, d, q, qd, qdd).iter());
             out
         }
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");

@@ -100,9 +100,6 @@ pub(crate) fn update_frames(robot: &Robot, data: &mut ModelData, n: usize) {
 
 #[inline(always)]
 pub(crate) fn update_kinematics_with<S: Isa>(robot: &Robot, data: &mut ModelData, q: &JointVector) {
-    if robot.general {
-        return crate::general::update_kinematics::<S>(robot, data, q);
-    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         update_frames(robot, data, n)
@@ -110,9 +107,18 @@ pub(crate) fn update_kinematics_with<S: Isa>(robot: &Robot, data: &mut ModelData
 }
 
 multiversion! {
-    /// Every frame and the tool frame for `q`, left in `data`.
-    pub(crate) fn update_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector)
-        => update_kinematics_with;
+    /// [`update_kinematics`] for DH robots.
+    #[inline(always)]
+    fn update_kinematics_dh(robot: &Robot, data: &mut ModelData, q: &JointVector) => update_kinematics_with;
+}
+
+/// Every frame and the tool frame for `q`, left in `data`.
+pub(crate) fn update_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector) {
+    if robot.general {
+        crate::general::update_kinematics(robot, data, q)
+    } else {
+        update_kinematics_dh(robot, data, q)
+    }
 }
 
 #[inline(always)]
@@ -131,9 +137,6 @@ pub(crate) fn jacobian_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> Jacobian {
-    if robot.general {
-        return crate::general::jacobian::<S>(robot, data, q);
-    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         update_frames(robot, data, n);
@@ -148,20 +151,38 @@ pub(crate) fn tool_pose_with<S: Isa>(robot: &Robot, data: &mut ModelData, q: &Jo
 }
 
 multiversion! {
-    /// Tool pose in the base frame for joint positions `q` (seed eq. 1 chained, then
-    /// the tool transform). Every DH frame is left in `data` ([`ModelData::frame`]);
-    /// [`ModelData::tool_frame`] gives the same pose as a rotation matrix.
-    pub fn forward_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Isometry3<f64>
-        => forward_kinematics_with;
+    /// [`forward_kinematics`] for DH robots.
+    #[inline(always)]
+    fn forward_kinematics_dh(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Isometry3<f64> => forward_kinematics_with;
+}
+
+/// Tool pose in the base frame for joint positions `q` (seed eq. 1 chained, then
+/// the tool transform). Every joint frame is left in `data` ([`ModelData::frame`]);
+/// [`ModelData::tool_frame`] gives the same pose as a rotation matrix.
+pub fn forward_kinematics(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Isometry3<f64> {
+    if robot.general {
+        crate::general::forward_kinematics(robot, data, q)
+    } else {
+        forward_kinematics_dh(robot, data, q)
+    }
 }
 
 multiversion! {
-    /// Geometric Jacobian of the tool frame origin in the base frame (rows
-    /// `vx vy vz wx wy wz`): column `j` is `[z_{j-1} × (p − o_{j-1}); z_{j-1}]` for a
-    /// revolute joint and `[z_{j-1}; 0]` for a prismatic one. Runs the forward
-    /// kinematics too (frames left in `data`).
-    pub fn jacobian(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Jacobian
-        => jacobian_with;
+    /// [`jacobian`] for DH robots.
+    #[inline(always)]
+    fn jacobian_dh(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Jacobian => jacobian_with;
+}
+
+/// Geometric Jacobian of the tool frame origin in the base frame (rows
+/// `vx vy vz wx wy wz`): column `j` is `[z_{j-1} × (p − o_{j-1}); z_{j-1}]` for a
+/// revolute joint and `[z_{j-1}; 0]` for a prismatic one. Runs the forward
+/// kinematics too (frames left in `data`).
+pub fn jacobian(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Jacobian {
+    if robot.general {
+        crate::general::jacobian(robot, data, q)
+    } else {
+        jacobian_dh(robot, data, q)
+    }
 }
 
 /// The Jacobian from the frames already in `data`.
@@ -303,8 +324,17 @@ pub fn rank(jac: &Jacobian, dof: usize, rows: TaskRows) -> usize {
 }
 
 multiversion! {
-    /// Pose of every DH frame and the tool; convenience for callers that want the
-    /// homogeneous matrices (e.g. the eval interface).
-    pub fn tool_pose(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose
-        => tool_pose_with;
+    /// [`tool_pose`] for DH robots.
+    #[inline(always)]
+    fn tool_pose_dh(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose => tool_pose_with;
+}
+
+/// Pose of every joint frame and the tool; convenience for callers that want the
+/// homogeneous matrices (e.g. the eval interface).
+pub fn tool_pose(robot: &Robot, data: &mut ModelData, q: &JointVector) -> Pose {
+    if robot.general {
+        crate::general::tool_pose(robot, data, q)
+    } else {
+        tool_pose_dh(robot, data, q)
+    }
 }

@@ -1,6 +1,7 @@
 //! Serial-arm model for the microrobot motion stack: robot files, kinematics,
 //! inverse kinematics, workspace and rigid-body dynamics. Pure computation: no I/O
-//! beyond [`Robot::from_file`], no IPC, no allocation on the hot path.
+//! beyond [`Robot::from_file`] (DH files, URDF files and their overlays), no IPC,
+//! no allocation on the hot path.
 //!
 //! The design follows Pinocchio's model/data split: a [`Robot`] is immutable and
 //! shared; a [`ModelData`] is preallocated scratch owned by one caller, and every
@@ -11,6 +12,11 @@
 //! `theta` (revolute) or `d` (prismatic); SI units everywhere inside; vectors are
 //! [`JointVector`]s of length [`MAX_JOINTS`] whose entries at and beyond
 //! [`Robot::dof`] are zero on output and ignored on input.
+//!
+//! Robots from URDF ([`Robot::from_file`] on a `.urdf` or an overlay) have
+//! placed joints instead ([`JointPlacement`]: a constant rotation and
+//! translation from the parent frame, then a motion about or along a unit
+//! axis); every algorithm takes them, through a general path beside the DH one.
 //!
 //! ```
 //! use microrobot_model::{Robot, ModelData, JointVector, rnea, forward_kinematics};

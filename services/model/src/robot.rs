@@ -440,8 +440,9 @@ pub struct Robot {
 
 impl Robot {
     /// Assembles a robot from already validated parts (the file loader checks
-    /// every value; this constructor only refuses a chain that does not fit).
-    /// `tool` is the fixed transform from the last DH frame to the tool frame;
+    /// every value; this constructor only refuses a chain that does not fit,
+    /// mixes DH rows with placements, or has a zero or non-finite axis).
+    /// `tool` is the fixed transform from the last joint frame to the tool frame;
     /// `payload` is given in the tool frame and is added to the last link.
     pub fn new(
         name: impl Into<String>,

@@ -112,9 +112,6 @@ pub(crate) fn mass_matrix_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> MassMatrix {
-    if robot.general {
-        return crate::general::mass_matrix::<S>(robot, data, q);
-    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         mass_matrix_from_joint_values(robot, data, n, plain)
@@ -123,10 +120,19 @@ pub(crate) fn mass_matrix_with<S: Isa>(
 }
 
 multiversion! {
-    /// Joint-space mass matrix `M(q)` (the seed's `D_ij`, eq. 20) with rotor inertia
-    /// on the diagonal; symmetric, zero outside the `dof` block. Allocation-free.
-    pub fn mass_matrix(robot: &Robot, data: &mut ModelData, q: &JointVector) -> MassMatrix
-        => mass_matrix_with;
+    /// [`mass_matrix`] for DH robots.
+    #[inline(always)]
+    fn mass_matrix_dh(robot: &Robot, data: &mut ModelData, q: &JointVector) -> MassMatrix => mass_matrix_with;
+}
+
+/// Joint-space mass matrix `M(q)` (the seed's `D_ij`, eq. 20) with rotor inertia
+/// on the diagonal; symmetric, zero outside the `dof` block. Allocation-free.
+pub fn mass_matrix(robot: &Robot, data: &mut ModelData, q: &JointVector) -> MassMatrix {
+    if robot.general {
+        crate::general::mass_matrix(robot, data, q)
+    } else {
+        mass_matrix_dh(robot, data, q)
+    }
 }
 
 /// `p × f` for `p = (a cos θ, a sin θ, d)`, the origin of frame `k + 1` in

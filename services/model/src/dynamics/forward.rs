@@ -45,11 +45,9 @@ pub(crate) fn forward_dynamics_with<S: Isa>(
 }
 
 multiversion! {
-    /// Joint accelerations for applied joint torques `tau` (the inverse of
-    /// [`crate::rnea`], friction and rotor inertia included). When `M(q)` is singular
-    /// (see [`DynamicsError`]) every entry is NaN, so a caller that validates its
-    /// outputs refuses it; use [`try_forward_dynamics`] to get the reason.
-    pub fn forward_dynamics(
+    /// [`forward_dynamics`] for DH robots.
+    #[inline(always)]
+    fn forward_dynamics_dh(
         robot: &Robot,
         data: &mut ModelData,
         q: &JointVector,
@@ -58,15 +56,49 @@ multiversion! {
     ) -> JointVector => forward_dynamics_with;
 }
 
+/// Joint accelerations for applied joint torques `tau` (the inverse of
+/// [`crate::rnea`], friction and rotor inertia included). When `M(q)` is singular
+/// (see [`DynamicsError`]) every entry is NaN, so a caller that validates its
+/// outputs refuses it; use [`try_forward_dynamics`] to get the reason.
+pub fn forward_dynamics(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+    tau: &JointVector,
+) -> JointVector {
+    if robot.general {
+        crate::general::forward_dynamics(robot, data, q, qd, tau)
+    } else {
+        forward_dynamics_dh(robot, data, q, qd, tau)
+    }
+}
+
 multiversion! {
-    /// [`forward_dynamics`] that reports a singular mass matrix as an error.
-    pub fn try_forward_dynamics(
+    /// [`try_forward_dynamics`] for DH robots.
+    #[inline(always)]
+    fn try_forward_dynamics_dh(
         robot: &Robot,
         data: &mut ModelData,
         q: &JointVector,
         qd: &JointVector,
         tau: &JointVector,
     ) -> Result<JointVector, DynamicsError> => try_forward_dynamics_with;
+}
+
+/// [`forward_dynamics`] that reports a singular mass matrix as an error.
+pub fn try_forward_dynamics(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+    tau: &JointVector,
+) -> Result<JointVector, DynamicsError> {
+    if robot.general {
+        crate::general::try_forward_dynamics(robot, data, q, qd, tau)
+    } else {
+        try_forward_dynamics_dh(robot, data, q, qd, tau)
+    }
 }
 
 #[inline(always)]
@@ -77,9 +109,6 @@ pub(crate) fn try_forward_dynamics_with<S: Isa>(
     qd: &JointVector,
     tau: &JointVector,
 ) -> Result<JointVector, DynamicsError> {
-    if robot.general {
-        return crate::general::try_forward_dynamics::<S>(robot, data, q, qd, tau);
-    }
     for_shape!(robot, |n, plain| solve_forward_dynamics::<S>(
         robot, data, q, qd, tau, n, plain
     ))
@@ -121,24 +150,7 @@ fn solve_forward_dynamics<S: Isa>(
     for i in 0..n {
         x[i] = tau[i] - h[i];
     }
-    solve_ldlt(n, &a, &inv_pivot, &mut x);
-    let mut qdd = JointVector::zeros();
-    for i in 0..n {
-        qdd[i] = x[i];
-    }
-    Ok(qdd)
-}
-
-/// Solves `L D Lᵀ y = x` in place with the factors of [`factor_ldlt`]:
-/// `L y = x`, `D z = y`, `Lᵀ qdd = z`.
-#[inline(always)]
-pub(crate) fn solve_ldlt(
-    n: usize,
-    a: &Square,
-    inv_pivot: &[f64; MAX_JOINTS],
-    x: &mut [f64; MAX_JOINTS],
-) {
-    let n = n.min(MAX_JOINTS);
+    // L y = x, D z = y, Lᵀ qdd = z.
     for i in 0..n {
         let mut v = x[i];
         for k in 0..i {
@@ -153,6 +165,11 @@ pub(crate) fn solve_ldlt(
         }
         x[i] = v;
     }
+    let mut qdd = JointVector::zeros();
+    for i in 0..n {
+        qdd[i] = x[i];
+    }
+    Ok(qdd)
 }
 
 /// An `n × n` block in the top left, `n <= MAX_JOINTS`, row by row.
@@ -196,4 +213,31 @@ pub(crate) fn factor_ldlt(n: usize, a: &mut Square) -> Result<[f64; MAX_JOINTS],
         }
     }
     Ok(inv_pivot)
+}
+
+/// Solves `L D Lᵀ y = x` in place with the factors of [`factor_ldlt`]:
+/// `L y = x`, `D z = y`, `Lᵀ qdd = z` (the placed-joint path's copy of the
+/// solve in `solve_forward_dynamics`).
+#[inline(always)]
+pub(crate) fn solve_ldlt(
+    n: usize,
+    a: &Square,
+    inv_pivot: &[f64; MAX_JOINTS],
+    x: &mut [f64; MAX_JOINTS],
+) {
+    let n = n.min(MAX_JOINTS);
+    for i in 0..n {
+        let mut v = x[i];
+        for k in 0..i {
+            v -= a[i][k] * x[k];
+        }
+        x[i] = v;
+    }
+    for i in (0..n).rev() {
+        let mut v = x[i] * inv_pivot[i];
+        for k in (i + 1)..n {
+            v -= a[k][i] * x[k];
+        }
+        x[i] = v;
+    }
 }

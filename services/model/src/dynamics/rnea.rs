@@ -29,9 +29,6 @@ pub(crate) fn rnea_with<S: Isa>(
     qd: &JointVector,
     qdd: &JointVector,
 ) -> JointVector {
-    if robot.general {
-        return crate::general::rnea::<S>(robot, data, q, qd, qdd, ALL);
-    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         rnea_from_joint_values(robot, data, qd, qdd, ALL, n, plain)
@@ -45,9 +42,6 @@ pub(crate) fn nonlinear_effects_with<S: Isa>(
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
-    if robot.general {
-        return crate::general::rnea::<S>(robot, data, q, qd, &JointVector::zeros(), ALL);
-    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
         rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), ALL, n, plain)
@@ -60,16 +54,13 @@ pub(crate) fn gravity_torque_with<S: Isa>(
     data: &mut ModelData,
     q: &JointVector,
 ) -> JointVector {
-    let zero = JointVector::zeros();
-    let terms = RneaTerms {
-        gravity: true,
-        friction: false,
-    };
-    if robot.general {
-        return crate::general::rnea::<S>(robot, data, q, &zero, &zero, terms);
-    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
+        let zero = JointVector::zeros();
+        let terms = RneaTerms {
+            gravity: true,
+            friction: false,
+        };
         rnea_from_joint_values(robot, data, &zero, &zero, terms, n, plain)
     })
 }
@@ -81,25 +72,20 @@ pub(crate) fn coriolis_torque_with<S: Isa>(
     q: &JointVector,
     qd: &JointVector,
 ) -> JointVector {
-    let terms = RneaTerms {
-        gravity: false,
-        friction: false,
-    };
-    if robot.general {
-        let zero = JointVector::zeros();
-        return crate::general::rnea::<S>(robot, data, q, qd, &zero, terms);
-    }
     for_shape!(robot, |n, plain| {
         update_joint_values::<S>(robot, data, q, n, plain);
+        let terms = RneaTerms {
+            gravity: false,
+            friction: false,
+        };
         rnea_from_joint_values(robot, data, qd, &JointVector::zeros(), terms, n, plain)
     })
 }
 
 multiversion! {
-    /// Joint torques for the full equation of motion (see [`crate::dynamics`]):
-    /// rigid bodies including the payload, gravity, rotor inertia `I_rotor·qdd`,
-    /// viscous and Coulomb friction. Allocation-free.
-    pub fn rnea(
+    /// [`rnea`] for DH robots.
+    #[inline(always)]
+    fn rnea_dh(
         robot: &Robot,
         data: &mut ModelData,
         q: &JointVector,
@@ -108,10 +94,27 @@ multiversion! {
     ) -> JointVector => rnea_with;
 }
 
+/// Joint torques for the full equation of motion (see [`crate::dynamics`]):
+/// rigid bodies including the payload, gravity, rotor inertia `I_rotor·qdd`,
+/// viscous and Coulomb friction. Allocation-free.
+pub fn rnea(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+    qdd: &JointVector,
+) -> JointVector {
+    if robot.general {
+        crate::general::rnea(robot, data, q, qd, qdd)
+    } else {
+        rnea_dh(robot, data, q, qd, qdd)
+    }
+}
+
 multiversion! {
-    /// `h(q, qd) = C(q, qd) qd + g(q) + friction(qd)`: the torque needed for zero
-    /// acceleration.
-    pub fn nonlinear_effects(
+    /// [`nonlinear_effects`] for DH robots.
+    #[inline(always)]
+    fn nonlinear_effects_dh(
         robot: &Robot,
         data: &mut ModelData,
         q: &JointVector,
@@ -119,21 +122,60 @@ multiversion! {
     ) -> JointVector => nonlinear_effects_with;
 }
 
-multiversion! {
-    /// Gravity torque `g(q)` (the seed's `D_i`, eq. 20).
-    pub fn gravity_torque(robot: &Robot, data: &mut ModelData, q: &JointVector) -> JointVector
-        => gravity_torque_with;
+/// `h(q, qd) = C(q, qd) qd + g(q) + friction(qd)`: the torque needed for zero
+/// acceleration.
+pub fn nonlinear_effects(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+) -> JointVector {
+    if robot.general {
+        crate::general::nonlinear_effects(robot, data, q, qd)
+    } else {
+        nonlinear_effects_dh(robot, data, q, qd)
+    }
 }
 
 multiversion! {
-    /// Coriolis and centrifugal torque `C(q, qd) qd` alone (no gravity, no friction;
-    /// the seed's `Σ D_ijk qd_j qd_k`, eq. 20).
-    pub fn coriolis_torque(
+    /// [`gravity_torque`] for DH robots.
+    #[inline(always)]
+    fn gravity_torque_dh(robot: &Robot, data: &mut ModelData, q: &JointVector) -> JointVector => gravity_torque_with;
+}
+
+/// Gravity torque `g(q)` (the seed's `D_i`, eq. 20).
+pub fn gravity_torque(robot: &Robot, data: &mut ModelData, q: &JointVector) -> JointVector {
+    if robot.general {
+        crate::general::gravity_torque(robot, data, q)
+    } else {
+        gravity_torque_dh(robot, data, q)
+    }
+}
+
+multiversion! {
+    /// [`coriolis_torque`] for DH robots.
+    #[inline(always)]
+    fn coriolis_torque_dh(
         robot: &Robot,
         data: &mut ModelData,
         q: &JointVector,
         qd: &JointVector,
     ) -> JointVector => coriolis_torque_with;
+}
+
+/// Coriolis and centrifugal torque `C(q, qd) qd` alone (no gravity, no friction;
+/// the seed's `Σ D_ijk qd_j qd_k`, eq. 20).
+pub fn coriolis_torque(
+    robot: &Robot,
+    data: &mut ModelData,
+    q: &JointVector,
+    qd: &JointVector,
+) -> JointVector {
+    if robot.general {
+        crate::general::coriolis_torque(robot, data, q, qd)
+    } else {
+        coriolis_torque_dh(robot, data, q, qd)
+    }
 }
 
 /// RNEA on joint values already evaluated into `data` (`cos`, `sin`, `d`); `plain`
