@@ -18,6 +18,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{BufWriter, Write as _};
+use std::os::unix::fs::OpenOptionsExt as _;
 use std::path::PathBuf;
 use std::sync::mpsc;
 
@@ -289,10 +290,20 @@ impl Writer {
     }
 
     fn finish(mut self, instance: &str) -> Result<RecordSummary> {
-        let cfg = crate::supervisor::instance::state_dir()
-            .join(instance)
-            .join(CONFIG_ATTACHMENT);
-        if let Ok(data) = std::fs::read(&cfg) {
+        // Only from this user's private run directory, never through a symlink.
+        let data = crate::supervisor::instance::run_file(instance, CONFIG_ATTACHMENT)
+            .ok()
+            .and_then(|p| {
+                let mut f = std::fs::OpenOptions::new()
+                    .read(true)
+                    .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
+                    .open(p)
+                    .ok()?;
+                let mut data = Vec::new();
+                std::io::Read::read_to_end(&mut f, &mut data).ok()?;
+                Some(data)
+            });
+        if let Some(data) = data {
             let now = monotonic_ns();
             self.mcap
                 .attach(&mcap::Attachment {
@@ -405,7 +416,10 @@ pub fn main(args: RecordArgs) -> Result<()> {
         );
     }
     if let Some(path) = &args.ready_file {
-        File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+        // A new file (a stale one removed first), owner-only, never through a symlink.
+        let _ = std::fs::remove_file(path);
+        crate::supervisor::instance::create_private_new(path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
     }
     println!("recording {}", args.out.display());
     let _ = std::io::stdout().flush();
