@@ -20,7 +20,10 @@ pub mod stream;
 pub use command::{CommandKind, MotionCommand, ProfileKind, TargetSpace};
 pub use master::MasterPose;
 pub use ports::{BusError, ServiceKind, open_event, open_publish_subscribe, service_name};
-pub use status::{LatencySummary, LifecycleState, RefusalReason, ServiceRole, ServiceStatus};
+pub use status::{
+    COMMAND_VERDICTS, CommandVerdict, LatencySummary, LifecycleState, RefusalReason, ServiceRole,
+    ServiceStatus, VerdictLookup,
+};
 pub use stream::{
     Header, JointSetpoint, JointState, TorqueCommand, setpoint_flags, state_flags, torque_flags,
 };

@@ -1,6 +1,8 @@
 //! `microrobot send`: one motion command (move, stop, e-stop, reset) to a running
-//! pipeline's planner, validated here first, and the planner's verdict reported from
-//! its status stream (`commands_accepted` / `commands_refused`).
+//! pipeline's planner, validated here first, and the planner's verdict on this very
+//! command reported from its status stream: the status carries the verdicts of the
+//! planner's recent commands, each with the sending publisher's id and the command's
+//! `seq`, so parallel senders each find their own.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -9,8 +11,9 @@ use anyhow::{Context as _, bail, ensure};
 use iceoryx2::prelude::*;
 use iceoryx2::service::messaging_pattern::MessagingPattern;
 use microrobot_messages::{
-    CommandKind, MAX_JOINTS, MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole,
-    TargetSpace, monotonic_ns, open_event, open_publish_subscribe, service_name,
+    COMMAND_VERDICTS, CommandKind, MAX_JOINTS, MotionCommand, ProfileKind, RefusalReason,
+    ServiceKind, ServiceRole, TargetSpace, VerdictLookup, monotonic_ns, open_event,
+    open_publish_subscribe, service_name,
 };
 use microrobot_model::{JointKind, Robot};
 use microrobot_runtime::PipelineConfig;
@@ -301,37 +304,52 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("cannot send the command: {e:?}"))?;
     let _ = notifier.notify();
 
+    let me = publisher.id().value();
     let end = Instant::now() + timeout;
+    let mut maybe_overwritten = false;
     loop {
-        monitor.poll()?;
-        if let Some(st) = monitor.get(ServiceRole::Planner) {
+        // Every status, not only the newest: each carries the verdicts taken until then.
+        for st in monitor.poll_all()? {
+            if st.role != ServiceRole::Planner as u32 {
+                continue;
+            }
             if st.pid != base.pid {
                 bail!(
                     "the planner restarted while the command was in flight; its verdict is unknown"
                 );
             }
-            if st.commands_refused > base.commands_refused {
-                let why = RefusalReason::from_wire(st.last_command_refusal)
-                    .filter(|r| *r != RefusalReason::None)
-                    .map_or("see its log for why", RefusalReason::describe);
-                bail!(
-                    "the planner of `{instance}` refused the command: {why} (refused commands: {}; its log has the details)",
-                    st.commands_refused
-                );
-            }
-            if st.commands_accepted > base.commands_accepted {
-                println!(
-                    "accepted by the planner of `{instance}` (command seq {})",
-                    cmd.seq
-                );
-                return Ok(());
+            match st.command_verdict(me, cmd.seq, base.commands_taken()) {
+                VerdictLookup::Accepted => {
+                    println!(
+                        "accepted by the planner of `{instance}` (command seq {})",
+                        cmd.seq
+                    );
+                    return Ok(());
+                }
+                VerdictLookup::Refused(why) => {
+                    let why = why.map_or("see its log for why", RefusalReason::describe);
+                    bail!(
+                        "the planner of `{instance}` refused the command (seq {}): {why} (its log has the details)",
+                        cmd.seq
+                    );
+                }
+                VerdictLookup::MaybeOverwritten => maybe_overwritten = true,
+                VerdictLookup::NotYet => {}
             }
         }
-        ensure!(
-            Instant::now() < end,
-            "no verdict from the planner of `{instance}` within {:.1} s",
-            timeout.as_secs_f64()
-        );
-        std::thread::sleep(Duration::from_millis(10));
+        if Instant::now() >= end {
+            if maybe_overwritten {
+                bail!(
+                    "no verdict from the planner of `{instance}` within {:.1} s: more than {COMMAND_VERDICTS} commands reached it at once, so its status may no longer show this one (its log names every command's verdict by seq {})",
+                    timeout.as_secs_f64(),
+                    cmd.seq
+                );
+            }
+            bail!(
+                "no verdict from the planner of `{instance}` within {:.1} s",
+                timeout.as_secs_f64()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(5));
     }
 }

@@ -80,14 +80,15 @@ pub struct RecordSummary {
     pub config_attached: bool,
 }
 
-/// One received payload.
-#[derive(Clone, Copy)]
+/// One received payload (the status boxed: it is rare and several times larger than
+/// the cyclic payloads, which fill the writer's queue).
+#[derive(Clone)]
 enum Payload {
     Setpoint(JointSetpoint),
     Torque(TorqueCommand),
     State(JointState),
     Command(MotionCommand),
-    Status(ServiceStatus),
+    Status(Box<ServiceStatus>),
 }
 
 impl Payload {
@@ -451,7 +452,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
         drain(&tq, Payload::Torque, &tx, &mut on_payload);
         drain(&st, Payload::State, &tx, &mut on_payload);
         drain(&cm, Payload::Command, &tx, &mut on_payload);
-        drain(&ss, Payload::Status, &tx, &mut on_payload);
+        drain(&ss, |m| Payload::Status(Box::new(m)), &tx, &mut on_payload);
         let _ = timer.read_expirations();
         let now = monotonic_ns();
         if shutdown.is_requested() || end.is_some_and(|e| now >= e) {
@@ -471,7 +472,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
     drain(&tq, Payload::Torque, &tx, &mut on_payload);
     drain(&st, Payload::State, &tx, &mut on_payload);
     drain(&cm, Payload::Command, &tx, &mut on_payload);
-    drain(&ss, Payload::Status, &tx, &mut on_payload);
+    drain(&ss, |m| Payload::Status(Box::new(m)), &tx, &mut on_payload);
     drop(tx);
     let written = writer_thread
         .join()
