@@ -1,5 +1,6 @@
 //! Commanding a running pipeline: a move arriving mid-motion replans without a jump,
-//! `send` reports the planner's verdict, `top` shows every service.
+//! `send` reports the planner's verdict on its own command (also with senders in
+//! parallel), `top` shows every service.
 
 mod common;
 
@@ -120,4 +121,58 @@ fn a_move_arriving_mid_motion_replans_without_a_jump() {
             last.qd[j]
         );
     }
+}
+
+/// Eight `microrobot send` at once, four stops (accepted) and four moves to an
+/// unreachable pose (refused), three rounds: each sender reports the planner's verdict
+/// on its own command, not whichever counter moved first.
+#[test]
+fn parallel_sends_each_get_their_own_verdict() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("parallel-send");
+    let cfg = write_config(dir.path(), &inst, "", "");
+    let proc = start_holding(&inst, &cfg, 300, None);
+    let mut wrong = Vec::new();
+    for round in 0..3 {
+        let senders: Vec<_> = (0..8)
+            .map(|k| {
+                let (inst, cfg) = (inst.clone(), cfg.clone());
+                std::thread::spawn(move || {
+                    let stop = k % 2 == 0;
+                    let args: &[&str] = if stop {
+                        &["stop"]
+                    } else {
+                        &["move", "--pose", "10,10,10,1,0,0,0"]
+                    };
+                    (stop, send(&inst, &cfg, args))
+                })
+            })
+            .collect();
+        for h in senders {
+            let (stop, out) = h.join().expect("sender thread");
+            let ok = if stop {
+                out.code() == Some(0) && out.stdout.contains("accepted")
+            } else {
+                out.code() != Some(0) && out.stderr.contains("unreachable")
+            };
+            if !ok {
+                wrong.push(format!(
+                    "round {round}, {}: exit {:?}, stdout {:?}, stderr {:?}",
+                    if stop { "stop" } else { "unreachable move" },
+                    out.code(),
+                    out.stdout.trim(),
+                    out.stderr.trim()
+                ));
+            }
+        }
+    }
+    proc.signal(libc::SIGINT);
+    let out = proc.finish(60.0);
+    assert_eq!(out.code(), Some(0), "{}", out.stderr);
+    assert!(
+        wrong.is_empty(),
+        "{} of 24 senders reported a verdict not on their own command:\n{}",
+        wrong.len(),
+        wrong.join("\n")
+    );
 }

@@ -76,8 +76,9 @@ fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
     out
 }
 
-/// Copies `src` to `dst` with `q[0]` of the setpoint at position `which` changed.
-fn alter_setpoint(src: &Path, dst: &Path, which: usize) -> u64 {
+/// Copies `src` to `dst`, passing each message's data through `edit(topic, position
+/// in its topic, data)`, which returns the messages to write in its place.
+fn rewrite(src: &Path, dst: &Path, mut edit: impl FnMut(&str, usize, Vec<u8>) -> Vec<Vec<u8>>) {
     let bytes = std::fs::read(src).expect("read recording");
     let file = std::fs::File::create(dst).expect("create altered copy");
     let mut w = mcap::WriteOptions::new()
@@ -85,8 +86,7 @@ fn alter_setpoint(src: &Path, dst: &Path, which: usize) -> u64 {
         .create(std::io::BufWriter::new(file))
         .expect("writer");
     let mut channels: HashMap<u16, u16> = HashMap::new();
-    let mut n = 0;
-    let mut altered_seq = 0;
+    let mut n: HashMap<String, usize> = HashMap::new();
     for m in mcap::MessageStream::new(&bytes).expect("MCAP header") {
         let m = m.expect("MCAP message");
         let id = match channels.get(&m.channel.id) {
@@ -106,30 +106,64 @@ fn alter_setpoint(src: &Path, dst: &Path, which: usize) -> u64 {
                 cid
             }
         };
-        let mut data = m.data.to_vec();
-        if m.channel.topic == "setpoint" {
-            if n == which {
-                let mut v: Value = serde_json::from_slice(&data).expect("JSON");
-                let q0 = v["q"][0].as_f64().expect("q_0");
-                v["q"][0] = Value::from(q0 + 1e-3);
-                altered_seq = v["header"]["seq"].as_u64().expect("seq");
-                data = serde_json::to_vec(&v).expect("JSON");
-            }
-            n += 1;
+        let k = n.entry(m.channel.topic.clone()).or_default();
+        for data in edit(&m.channel.topic, *k, m.data.to_vec()) {
+            w.write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: id,
+                    sequence: m.sequence,
+                    log_time: m.log_time,
+                    publish_time: m.publish_time,
+                },
+                &data,
+            )
+            .expect("write");
         }
-        w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: id,
-                sequence: m.sequence,
-                log_time: m.log_time,
-                publish_time: m.publish_time,
-            },
-            &data,
-        )
-        .expect("write");
+        *k += 1;
     }
     w.finish().expect("finish");
+}
+
+/// Copies `src` to `dst` with `q[0]` of the setpoint at position `which` changed.
+fn alter_setpoint(src: &Path, dst: &Path, which: usize) -> u64 {
+    let mut altered_seq = 0;
+    rewrite(src, dst, |topic, k, data| {
+        if topic != "setpoint" || k != which {
+            return vec![data];
+        }
+        let mut v: Value = serde_json::from_slice(&data).expect("JSON");
+        let q0 = v["q"][0].as_f64().expect("q_0");
+        v["q"][0] = Value::from(q0 + 1e-3);
+        altered_seq = v["header"]["seq"].as_u64().expect("seq");
+        vec![serde_json::to_vec(&v).expect("JSON")]
+    });
     altered_seq
+}
+
+/// Copies `src` to `dst` with one malformed message spliced in after message `which` of
+/// each of `setpoint` (a setpoint with two joint values more than `dof` says: other
+/// fields), `torque` (not JSON) and `state` (a field of the wrong type).
+fn splice_malformed(src: &Path, dst: &Path, which: usize) {
+    rewrite(src, dst, |topic, k, data| {
+        if k != which {
+            return vec![data];
+        }
+        let mut v: Value = serde_json::from_slice(&data).expect("JSON");
+        let bad = match topic {
+            "setpoint" => {
+                let q = v["q"].as_array_mut().expect("q");
+                q.extend([Value::from(0.0), Value::from(0.0)]);
+                serde_json::to_vec(&v).expect("JSON")
+            }
+            "torque" => b"{\"header\": {\"seq\": 1,".to_vec(),
+            "state" => {
+                v["torque_seq"] = Value::from("seven");
+                serde_json::to_vec(&v).expect("JSON")
+            }
+            _ => return vec![data],
+        };
+        vec![data, bad]
+    });
 }
 
 #[test]
@@ -308,6 +342,78 @@ fn lockstep_run_recorded_exported_plotted_and_replayed_bit_for_bit() {
         states == count("state") || states + 1 == count("state"),
         "every recorded state compared: {r}"
     );
+
+    // A malformed message spliced into each of three topics: export and plot skip it,
+    // and say how many they skipped per topic.
+    let spliced = dir.path().join("spliced.mcap");
+    let spliced_s = spliced.to_str().expect("utf-8");
+    splice_malformed(&mcap_path, &spliced, 5);
+    let csv2 = dir.path().join("csv-spliced");
+    let ex = run(
+        &["export", spliced_s, "--csv", csv2.to_str().expect("utf-8")],
+        120.0,
+    );
+    assert_eq!(
+        ex.code(),
+        Some(0),
+        "export of a spliced file; stderr:\n{}",
+        ex.stderr
+    );
+    for t in ["setpoint", "torque", "state", "status"] {
+        let text = std::fs::read_to_string(csv2.join(format!("{t}.csv"))).expect("csv");
+        assert_eq!(
+            text.lines().count() as u64,
+            count(t) + 1,
+            "{t}.csv: every well-formed message, the spliced one left out"
+        );
+        let skipped = u64::from(t != "status");
+        assert!(
+            ex.stderr.contains(&format!(
+                "{t}.csv: {} rows ({skipped} malformed messages skipped)",
+                count(t)
+            )),
+            "{t}: {}",
+            ex.stderr
+        );
+    }
+    for (t, why) in [
+        ("setpoint", "other fields"),
+        ("torque", "not valid JSON"),
+        ("state", "torque_seq"),
+    ] {
+        assert!(
+            ex.stderr.contains(&format!(
+                "skipped 1 malformed `{t}` message (first: message 6: "
+            )) && ex.stderr.contains(why),
+            "{t}: {}",
+            ex.stderr
+        );
+    }
+    assert_eq!(
+        std::fs::read_to_string(csv2.join("setpoint.csv")).expect("csv"),
+        std::fs::read_to_string(csv_dir.join("setpoint.csv")).expect("csv"),
+        "the same CSV as from the file without the malformed message"
+    );
+    let png2 = dir.path().join("png-spliced");
+    let pl = run(
+        &["plot", spliced_s, "--out", png2.to_str().expect("utf-8")],
+        180.0,
+    );
+    assert_eq!(
+        pl.code(),
+        Some(0),
+        "plot of a spliced file; stderr:\n{}",
+        pl.stderr
+    );
+    for t in ["torque", "state"] {
+        assert!(
+            pl.stderr
+                .contains(&format!("skipped 1 malformed `{t}` message")),
+            "{t}: {}",
+            pl.stderr
+        );
+    }
+    assert!(png2.join("torque.png").exists());
 
     // An altered setpoint is reported, naming it.
     let altered = dir.path().join("altered.mcap");

@@ -124,8 +124,10 @@ fn send_checks_targets_against_the_robot_the_instance_runs() {
     );
     // The peak depends on where the earlier move left the arm; the limit does not.
     assert!(
-        fast.stderr
-            .contains("refused the command: no trajectory within the limits: j1 velocity ")
+        fast.stderr.contains("refused the command (seq ")
+            && fast
+                .stderr
+                .contains("): no trajectory within the limits: j1 velocity ")
             && fast.stderr.contains("°/s is outside [-135°/s, 135°/s]"),
         "{}",
         fast.stderr

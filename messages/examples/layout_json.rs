@@ -11,8 +11,8 @@ use std::mem::{align_of, offset_of, size_of, size_of_val};
 
 use iceoryx2::prelude::ZeroCopySend;
 use microrobot_messages::{
-    Header, JointSetpoint, JointState, LatencySummary, MasterPose, MotionCommand, ServiceStatus,
-    TorqueCommand,
+    CommandVerdict, Header, JointSetpoint, JointState, LatencySummary, MasterPose, MotionCommand,
+    ServiceStatus, TorqueCommand,
 };
 
 /// One payload type: name, iceoryx2 type name, size, alignment, (field, offset, size).
@@ -134,7 +134,14 @@ fn main() {
             refusal_quantity,
             refusal_value,
             refusal_min,
-            refusal_max
+            refusal_max,
+            command_verdicts
+        }),
+        layout!(CommandVerdict {
+            seq,
+            publisher,
+            refusal,
+            reserved
         }),
         layout!(MasterPose {
             seq,

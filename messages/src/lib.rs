@@ -21,8 +21,8 @@ pub use command::{CommandKind, MotionCommand, ProfileKind, TargetSpace};
 pub use master::MasterPose;
 pub use ports::{BusError, ServiceKind, open_event, open_publish_subscribe, service_name};
 pub use status::{
-    Activity, LatencySummary, LifecycleState, ProgramEnd, ProgramState, RefusalQuantity,
-    RefusalReason, ServiceRole, ServiceStatus,
+    Activity, COMMAND_VERDICTS, CommandVerdict, LatencySummary, LifecycleState, ProgramEnd,
+    ProgramState, RefusalQuantity, RefusalReason, ServiceRole, ServiceStatus, VerdictLookup,
 };
 pub use stream::{
     Header, JointSetpoint, JointState, TorqueCommand, setpoint_flags, state_flags, torque_flags,

@@ -365,6 +365,38 @@ pub struct LatencySummary {
     pub max_ns: u64,
 }
 
+/// How many recent command verdicts the planner's status carries
+/// ([`ServiceStatus::command_verdicts`]).
+pub const COMMAND_VERDICTS: usize = 16;
+
+/// The planner's verdict on one motion command ([`ServiceStatus::command_verdicts`]).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
+#[type_name("microrobot::v1::CommandVerdict")]
+pub struct CommandVerdict {
+    /// The command's `MotionCommand::seq`.
+    pub seq: u64,
+    /// The iceoryx2 id of the publisher that sent it (`UniquePublisherId`, a u128):
+    /// low 64 bits, then high 64 bits.
+    pub publisher: [u64; 2],
+    /// [`RefusalReason::None`] (0): accepted; otherwise why it was refused.
+    pub refusal: u32,
+    pub reserved: u32,
+}
+
+/// What a status says about one command (see [`ServiceStatus::command_verdict`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VerdictLookup {
+    /// Accepted.
+    Accepted,
+    /// Refused, with why (`None` for a reason this build does not know).
+    Refused(Option<RefusalReason>),
+    /// Not taken yet by the planner as far as this status shows.
+    NotYet,
+    /// Not in this status, and newer commands may have pushed it out of the ring.
+    MaybeOverwritten,
+}
+
 /// Health and counters of one service. Counters are cumulative since the process started.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
@@ -448,4 +480,52 @@ pub struct ServiceStatus {
     pub refusal_value: f64,
     pub refusal_min: f64,
     pub refusal_max: f64,
+    /// Planner: the verdicts of the last [`COMMAND_VERDICTS`] motion commands, a ring: the
+    /// command taken as number `n` (0-based; `n` = `commands_accepted + commands_refused`
+    /// before it) is at index `n % COMMAND_VERDICTS`. Each sender finds its own command
+    /// by publisher id and `seq` (see [`ServiceStatus::command_verdict`]).
+    pub command_verdicts: [CommandVerdict; COMMAND_VERDICTS],
+}
+
+impl ServiceStatus {
+    /// Motion commands the planner has taken (accepted + refused).
+    pub fn commands_taken(&self) -> u64 {
+        self.commands_accepted + self.commands_refused
+    }
+
+    /// Records the verdict of the next command (call after counting it in
+    /// `commands_accepted` / `commands_refused`).
+    pub fn record_command_verdict(&mut self, seq: u64, publisher: u128, refusal: RefusalReason) {
+        let n = self.commands_taken().saturating_sub(1);
+        self.command_verdicts[(n % COMMAND_VERDICTS as u64) as usize] = CommandVerdict {
+            seq,
+            publisher: [publisher as u64, (publisher >> 64) as u64],
+            refusal: refusal as u32,
+            reserved: 0,
+        };
+    }
+
+    /// The verdict on the command `seq` from `publisher`, sent after a status that had
+    /// counted `taken_before` commands ([`ServiceStatus::commands_taken`]).
+    pub fn command_verdict(&self, publisher: u128, seq: u64, taken_before: u64) -> VerdictLookup {
+        let taken = self.commands_taken();
+        let oldest = taken
+            .saturating_sub(COMMAND_VERDICTS as u64)
+            .max(taken_before);
+        let id = [publisher as u64, (publisher >> 64) as u64];
+        for n in oldest..taken {
+            let v = &self.command_verdicts[(n % COMMAND_VERDICTS as u64) as usize];
+            if v.seq == seq && v.publisher == id {
+                return match RefusalReason::from_wire(v.refusal) {
+                    Some(RefusalReason::None) => VerdictLookup::Accepted,
+                    r => VerdictLookup::Refused(r),
+                };
+            }
+        }
+        if taken > taken_before + COMMAND_VERDICTS as u64 {
+            VerdictLookup::MaybeOverwritten
+        } else {
+            VerdictLookup::NotYet
+        }
+    }
 }

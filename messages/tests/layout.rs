@@ -48,7 +48,12 @@ fn status_layout_is_stable() {
     assert_eq!(offset_of!(ServiceStatus, refusal_value), 368);
     assert_eq!(offset_of!(ServiceStatus, refusal_min), 376);
     assert_eq!(offset_of!(ServiceStatus, refusal_max), 384);
-    assert_eq!(size_of::<ServiceStatus>(), 392);
+    assert_eq!(offset_of!(ServiceStatus, command_verdicts), 392);
+    assert_eq!(offset_of!(CommandVerdict, publisher), 8);
+    assert_eq!(offset_of!(CommandVerdict, refusal), 24);
+    assert_eq!(size_of::<CommandVerdict>(), 32);
+    assert_eq!(COMMAND_VERDICTS, 16);
+    assert_eq!(size_of::<ServiceStatus>(), 392 + 16 * 32);
     assert_eq!(align_of::<ServiceStatus>(), 8);
 }
 
@@ -124,4 +129,43 @@ fn all_finite_checks_only_active_joints() {
     assert!(all_finite(&v, 6));
     assert!(!all_finite(&v, 8));
     assert!(!all_finite(&v, 9));
+}
+
+/// Each sender finds its own command's verdict in the ring, also after it wrapped, and
+/// is told when newer commands may have pushed its verdict out.
+#[test]
+fn command_verdicts_are_found_by_publisher_and_seq() {
+    let mut st = ServiceStatus::default();
+    let take = |st: &mut ServiceStatus, seq: u64, publisher: u128, r: RefusalReason| {
+        if r == RefusalReason::None {
+            st.commands_accepted += 1;
+        } else {
+            st.commands_refused += 1;
+        }
+        st.record_command_verdict(seq, publisher, r);
+    };
+    let a = 1u128 << 100 | 7;
+    let b = 2u128 << 100 | 7;
+    assert_eq!(st.command_verdict(a, 5, 0), VerdictLookup::NotYet);
+    take(&mut st, 5, a, RefusalReason::None);
+    // The same seq from another publisher is another command.
+    take(&mut st, 5, b, RefusalReason::CannotPlan);
+    assert_eq!(st.command_verdict(a, 5, 0), VerdictLookup::Accepted);
+    assert_eq!(
+        st.command_verdict(b, 5, 0),
+        VerdictLookup::Refused(Some(RefusalReason::CannotPlan))
+    );
+    // Taken before the sender's baseline: not this sender's command.
+    assert_eq!(st.command_verdict(a, 5, 2), VerdictLookup::NotYet);
+    for k in 0..15u64 {
+        take(&mut st, 100 + k, a, RefusalReason::None);
+    }
+    // 17 taken: the first fell out of the ring of 16, the second is still there.
+    assert_eq!(st.commands_taken(), 17);
+    assert_eq!(st.command_verdict(a, 5, 0), VerdictLookup::MaybeOverwritten);
+    assert_eq!(
+        st.command_verdict(b, 5, 0),
+        VerdictLookup::Refused(Some(RefusalReason::CannotPlan))
+    );
+    assert_eq!(st.command_verdict(a, 114, 0), VerdictLookup::Accepted);
 }

@@ -102,6 +102,14 @@ pub fn start(args: &[&str]) -> Proc {
 }
 
 impl Proc {
+    /// Wraps a child started by the test itself (stdout and stderr piped).
+    pub fn from_child(child: Child) -> Self {
+        Self {
+            child,
+            started: Instant::now(),
+        }
+    }
+
     pub fn pid(&self) -> i32 {
         self.child.id() as i32
     }

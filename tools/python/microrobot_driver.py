@@ -100,6 +100,15 @@ class LatencySummary(ctypes.Structure):
                 ("p9999_ns", ctypes.c_uint64), ("max_ns", ctypes.c_uint64)]
 
 
+COMMAND_VERDICTS = 16
+
+
+@_named("CommandVerdict")
+class CommandVerdict(ctypes.Structure):
+    _fields_ = [("seq", ctypes.c_uint64), ("publisher", ctypes.c_uint64 * 2),
+                ("refusal", ctypes.c_uint32), ("reserved", ctypes.c_uint32)]
+
+
 @_named("ServiceStatus")
 class ServiceStatus(ctypes.Structure):
     _fields_ = [("seq", ctypes.c_uint64), ("stamp_ns", ctypes.c_uint64),
@@ -120,7 +129,8 @@ class ServiceStatus(ctypes.Structure):
                 ("activity", ctypes.c_uint32), ("reserved", ctypes.c_uint32),
                 ("refusal_joint", ctypes.c_uint32), ("refusal_quantity", ctypes.c_uint32),
                 ("refusal_value", ctypes.c_double), ("refusal_min", ctypes.c_double),
-                ("refusal_max", ctypes.c_double)]
+                ("refusal_max", ctypes.c_double),
+                ("command_verdicts", CommandVerdict * COMMAND_VERDICTS)]
 
 
 @_named("MasterPose")
@@ -132,7 +142,7 @@ class MasterPose(ctypes.Structure):
 
 
 PAYLOADS = [Header, JointSetpoint, TorqueCommand, JointState, MotionCommand, LatencySummary,
-            ServiceStatus, MasterPose]
+            CommandVerdict, ServiceStatus, MasterPose]
 
 
 # --- enums and flags (u32 on the wire) -------------------------------------------------

@@ -322,8 +322,7 @@ pub fn hz(args: HzArgs) -> Result<()> {
 
 /// `microrobot logs`.
 pub fn logs(args: LogsArgs) -> Result<()> {
-    let dir = instance::state_dir().join(&args.instance);
-    let path = dir.join(format!("{}.log", args.role));
+    let path = instance::run_file(&args.instance, &format!("{}.log", args.role))?;
     let mut file = std::fs::File::open(&path).map_err(|e| {
         anyhow!(
             "{}: {e} (no run of instance `{}` with a {} here; see `microrobot list`)",

@@ -724,8 +724,7 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
 
     let run_dir = instance::run_dir(&instance_name).map_err(fail(exit_code::FAILURE))?;
     let resolved = run_dir.join("pipeline.resolved.toml");
-    std::fs::write(&resolved, cfg.to_toml_string())
-        .with_context(|| format!("cannot write {}", resolved.display()))
+    instance::write_private(&resolved, cfg.to_toml_string().as_bytes())
         .map_err(fail(exit_code::FAILURE))?;
 
     let stop_flag = Arc::new(AtomicBool::new(false));

@@ -1,6 +1,8 @@
 //! `microrobot send`: one motion command (move, stop, e-stop, reset) to a running
-//! pipeline's planner, validated here first, and the planner's verdict reported from
-//! its status stream (`commands_accepted` / `commands_refused`).
+//! pipeline's planner, validated here first, and the planner's verdict on this very
+//! command reported from its status stream: the status carries the verdicts of the
+//! planner's recent commands, each with the sending publisher's id and the command's
+//! `seq`, so parallel senders each find their own.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -9,8 +11,9 @@ use anyhow::{Context as _, bail, ensure};
 use iceoryx2::prelude::*;
 use iceoryx2::service::messaging_pattern::MessagingPattern;
 use microrobot_messages::{
-    CommandKind, MAX_JOINTS, MotionCommand, ProfileKind, RefusalReason, ServiceKind, ServiceRole,
-    TargetSpace, monotonic_ns, open_event, open_publish_subscribe, service_name,
+    COMMAND_VERDICTS, CommandKind, MAX_JOINTS, MotionCommand, ProfileKind, RefusalReason,
+    ServiceKind, ServiceRole, TargetSpace, VerdictLookup, monotonic_ns, open_event,
+    open_publish_subscribe, service_name,
 };
 use microrobot_model::{JointKind, Robot};
 use microrobot_runtime::PipelineConfig;
@@ -246,11 +249,16 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
         args.timeout
     );
     // The robot the running instance runs, from the config its supervisor resolved.
-    let resolved = crate::supervisor::instance::state_dir()
-        .join(&args.instance)
-        .join("pipeline.resolved.toml");
     let running = !crate::supervisor::instance::live_nodes(&args.instance).is_empty();
-    let config = if running && resolved.exists() {
+    let resolved = if running {
+        Some(crate::supervisor::instance::run_file(
+            &args.instance,
+            "pipeline.resolved.toml",
+        )?)
+    } else {
+        None
+    };
+    let config = if let Some(resolved) = resolved.filter(|p| p.exists()) {
         resolved
     } else {
         args.config.clone()
@@ -320,41 +328,69 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("cannot send the command: {e:?}"))?;
     let _ = notifier.notify();
 
+    let me = publisher.id().value();
     let end = Instant::now() + timeout;
+    let mut maybe_overwritten = false;
     loop {
-        monitor.poll()?;
-        if let Some(st) = monitor.get(ServiceRole::Planner) {
+        // Every status, not only the newest: each carries the verdicts taken until then.
+        for st in monitor.poll_all()? {
+            if st.role != ServiceRole::Planner as u32 {
+                continue;
+            }
             if st.pid != base.pid {
                 bail!(
                     "the planner restarted while the command was in flight; its verdict is unknown"
                 );
             }
-            if st.commands_refused > base.commands_refused {
-                let why = RefusalReason::from_wire(st.last_command_refusal)
-                    .filter(|r| *r != RefusalReason::None)
-                    .map_or("see its log for why", RefusalReason::describe);
-                let deg = matches!(&args.command, SendCommand::Move(m) if m.deg);
-                let detail = refusal_detail(st, robot.as_ref(), deg);
-                return Err(crate::exit::with_code(
-                    microrobot_runtime::exit_code::JOB_FAILED,
-                )(anyhow::anyhow!(
-                    "the planner of `{instance}` refused the command: {why}{detail}"
-                )));
-            }
-            if st.commands_accepted > base.commands_accepted {
-                println!(
-                    "accepted by the planner of `{instance}` (command seq {})",
-                    cmd.seq
-                );
-                return Ok(());
+            match st.command_verdict(me, cmd.seq, base.commands_taken()) {
+                VerdictLookup::Accepted => {
+                    println!(
+                        "accepted by the planner of `{instance}` (command seq {})",
+                        cmd.seq
+                    );
+                    return Ok(());
+                }
+                VerdictLookup::Refused(why) => {
+                    let why = why.map_or("see its log for why", RefusalReason::describe);
+                    // The status's limit detail is the newest refusal's: shown only when
+                    // that is this command (the newest command taken is ours).
+                    let newest = st.commands_taken().checked_sub(1).map(|n| {
+                        &st.command_verdicts
+                            [(n % microrobot_messages::COMMAND_VERDICTS as u64) as usize]
+                    });
+                    let id = [me as u64, (me >> 64) as u64];
+                    let ours = newest.is_some_and(|v| v.seq == cmd.seq && v.publisher == id);
+                    let deg = matches!(&args.command, SendCommand::Move(m) if m.deg);
+                    let detail = if ours {
+                        refusal_detail(&st, robot.as_ref(), deg)
+                    } else {
+                        String::new()
+                    };
+                    return Err(crate::exit::with_code(
+                        microrobot_runtime::exit_code::JOB_FAILED,
+                    )(anyhow::anyhow!(
+                        "the planner of `{instance}` refused the command (seq {}): {why}{detail}",
+                        cmd.seq
+                    )));
+                }
+                VerdictLookup::MaybeOverwritten => maybe_overwritten = true,
+                VerdictLookup::NotYet => {}
             }
         }
-        ensure!(
-            Instant::now() < end,
-            "no verdict from the planner of `{instance}` within {:.1} s",
-            timeout.as_secs_f64()
-        );
-        std::thread::sleep(Duration::from_millis(10));
+        if Instant::now() >= end {
+            if maybe_overwritten {
+                bail!(
+                    "no verdict from the planner of `{instance}` within {:.1} s: more than {COMMAND_VERDICTS} commands reached it at once, so its status may no longer show this one (its log names every command's verdict by seq {})",
+                    timeout.as_secs_f64(),
+                    cmd.seq
+                );
+            }
+            bail!(
+                "no verdict from the planner of `{instance}` within {:.1} s",
+                timeout.as_secs_f64()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(5));
     }
 }
 

@@ -260,11 +260,9 @@ impl ArmTap {
             .subscriber_builder()
             .create()
             .map_err(|e| anyhow::anyhow!("torque subscriber: {e:?}"))?;
-        let resolved = instance::state_dir()
-            .join(instance)
-            .join("pipeline.resolved.toml");
-        let robot = PipelineConfig::load(&resolved)
+        let robot = instance::run_file(instance, "pipeline.resolved.toml")
             .ok()
+            .and_then(|resolved| PipelineConfig::load(&resolved).ok())
             .and_then(|cfg| Robot::from_file(&cfg.robot).ok())
             .map(|r| {
                 let data = ModelData::new(&r);

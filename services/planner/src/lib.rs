@@ -1134,10 +1134,13 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             if ready.contains(on_command) {
                 let _ = cmd_listener.try_wait(|_| {});
             }
+            let mut took_commands = false;
             while let Ok(Some(s)) = cmd_sub.receive() {
                 let c = *s;
+                let publisher = s.header().publisher_id().value();
                 drop(s);
-                match core.on_command(&c, monotonic_ns()) {
+                let verdict = core.on_command(&c, monotonic_ns());
+                match &verdict {
                     Ok(()) => {
                         tracing::info!("planner: command {} (seq {}) accepted", c.kind, c.seq)
                     }
@@ -1145,6 +1148,21 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                         tracing::warn!("planner: command {} (seq {}) refused: {e}", c.kind, c.seq)
                     }
                 }
+                // The verdict goes into the status's ring, where its sender finds it.
+                st.commands_accepted = core.counters.commands_accepted;
+                st.commands_refused = core.counters.commands_refused;
+                st.record_command_verdict(
+                    c.seq,
+                    publisher,
+                    verdict.map_or_else(|e| e.reason(), |()| RefusalReason::None),
+                );
+                took_commands = true;
+            }
+            // Senders wait for their verdicts: publish them now rather than at the next
+            // periodic status (also keeps a burst of commands from overrunning the ring).
+            if took_commands {
+                fill(&mut st, &core, &lateness, &ticker, state_clock_misses);
+                status.publish(monotonic_ns(), &mut st);
             }
         }
         // Master samples: the newest valid one is used at the next tick.

@@ -1,14 +1,17 @@
 //! `microrobot export FILE.mcap --csv DIR`: one CSV per recorded topic.
 //!
 //! Columns: `log_time_ns`, then the message's fields flattened (`header.seq`, ...,
-//! `q_0`..`q_{dof-1}`); floats as recorded (shortest round-trip form).
+//! `q_0`..`q_{dof-1}`); floats as recorded (shortest round-trip form). Malformed
+//! messages are skipped and counted per topic, not exported.
 
+use std::collections::{BTreeMap, HashMap};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
+use serde_json::Value;
 
-use super::{Recording, TOPICS, flatten};
+use super::{Recording, TOPICS, flatten, setpoint_from, state_from, torque_from};
 
 /// Options of `microrobot export`.
 #[derive(Debug, Clone, clap::Args)]
@@ -29,61 +32,119 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-/// Writes one CSV per topic that has messages; returns (topic, rows) written.
-pub fn export(file: &Path, dir: &Path) -> Result<Vec<(String, usize)>> {
-    let rec = Recording::read(file)?;
+/// What [`export`] wrote.
+#[derive(Debug, Default)]
+pub struct Exported {
+    /// (topic, rows written), in pipeline order.
+    pub written: Vec<(String, usize)>,
+    /// One line per topic with malformed messages (skipped, not exported).
+    pub skipped: Vec<String>,
+    /// Malformed messages skipped, per topic.
+    pub skipped_counts: BTreeMap<String, usize>,
+}
+
+/// A message flattened: its position in the topic, log time and (column, value) cells.
+type Row = (usize, u64, Vec<(String, String)>);
+
+/// Whether the typed reader of `topic` (for the streams that have one) takes `v`.
+fn readable(topic: &str, v: &Value) -> Result<()> {
+    match topic {
+        "setpoint" => setpoint_from(v).map(drop),
+        "torque" => torque_from(v).map(drop),
+        "state" => state_from(v).map(drop),
+        _ => Ok(()),
+    }
+}
+
+/// Writes one CSV per topic that has messages. A malformed message (not JSON, refused
+/// by the topic's reader, or with other fields than the topic's other messages — the
+/// columns are those most of its messages have) is skipped and counted, not exported.
+pub fn export(file: &Path, dir: &Path) -> Result<Exported> {
+    let mut rec = Recording::read_skipping_malformed(file)?;
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let mut written = Vec::new();
-    let mut topics: Vec<&String> = rec.topics.keys().collect();
+    let mut out_report = Exported::default();
+    let mut topics: Vec<String> = rec.topics.keys().cloned().collect();
     topics.sort_by_key(|t| TOPICS.iter().position(|k| k == t).unwrap_or(TOPICS.len()));
     for topic in topics {
-        let msgs = rec.messages(topic);
+        // Flatten every message once; the columns are the most common field list.
+        let mut rows: Vec<Row> = Vec::new();
+        let mut bad = Vec::new();
+        for m in rec.messages(&topic) {
+            if let Err(e) = readable(&topic, &m.value) {
+                bad.push((m.index, format!("{e:#}")));
+                continue;
+            }
+            let mut cells = Vec::new();
+            flatten("", &m.value, &mut cells);
+            rows.push((m.index, m.log_time, cells));
+        }
+        let mut counts: HashMap<Vec<&str>, usize> = HashMap::new();
+        for (_, _, cells) in &rows {
+            *counts
+                .entry(cells.iter().map(|(k, _)| k.as_str()).collect())
+                .or_default() += 1;
+        }
+        let columns: Vec<String> = counts
+            .into_iter()
+            .max_by_key(|(names, n)| (*n, std::cmp::Reverse(names.clone())))
+            .map(|(names, _)| names.into_iter().map(str::to_string).collect())
+            .unwrap_or_default();
         let path = dir.join(format!("{topic}.csv"));
         let mut out = std::io::BufWriter::new(
             std::fs::File::create(&path)
                 .with_context(|| format!("cannot create {}", path.display()))?,
         );
-        let mut columns: Option<Vec<String>> = None;
-        let mut cells = Vec::new();
-        for (i, m) in msgs.iter().enumerate() {
-            cells.clear();
-            flatten("", &m.value, &mut cells);
-            let names: Vec<String> = cells.iter().map(|(k, _)| k.clone()).collect();
-            match &columns {
-                None => {
-                    let mut head = vec!["log_time_ns".to_string()];
-                    head.extend(names.iter().map(|n| csv_field(n)));
-                    writeln!(out, "{}", head.join(","))
-                        .with_context(|| format!("cannot write {}", path.display()))?;
-                    columns = Some(names);
-                }
-                Some(c) if *c != names => bail!(
-                    "{}: `{topic}` message {i} has other fields than the first (dof changed?)",
-                    file.display()
-                ),
-                Some(_) => {}
+        let mut head = vec!["log_time_ns".to_string()];
+        head.extend(columns.iter().map(|n| csv_field(n)));
+        writeln!(out, "{}", head.join(","))
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        let mut n = 0;
+        for (index, log_time, cells) in &rows {
+            if cells.len() != columns.len() || cells.iter().zip(&columns).any(|((k, _), c)| k != c)
+            {
+                bad.push((
+                    *index,
+                    format!(
+                        "other fields than the topic's other messages ({} columns, expected {})",
+                        cells.len(),
+                        columns.len()
+                    ),
+                ));
+                continue;
             }
-            let mut row = vec![m.log_time.to_string()];
+            let mut row = vec![log_time.to_string()];
             row.extend(cells.iter().map(|(_, v)| csv_field(v)));
             writeln!(out, "{}", row.join(","))
                 .with_context(|| format!("cannot write {}", path.display()))?;
+            n += 1;
         }
         out.flush()
             .with_context(|| format!("cannot write {}", path.display()))?;
-        written.push((topic.clone(), msgs.len()));
+        rec.note_malformed(&topic, bad);
+        out_report.written.push((topic.clone(), n));
     }
-    Ok(written)
+    out_report.skipped = rec.malformed_report(file);
+    out_report.skipped_counts = rec
+        .malformed
+        .iter()
+        .map(|(t, v)| (t.clone(), v.len()))
+        .collect();
+    Ok(out_report)
 }
 
 /// Runs `microrobot export`.
 pub fn main(args: ExportArgs) -> Result<()> {
-    let written = export(&args.file, &args.csv)?;
-    if written.is_empty() {
+    let exported = export(&args.file, &args.csv)?;
+    for line in &exported.skipped {
+        eprintln!("warning: {line}");
+    }
+    if exported.written.is_empty() {
         bail!("{}: the recording holds no messages", args.file.display());
     }
-    for (topic, rows) in written {
+    for (topic, rows) in &exported.written {
+        let skipped = exported.skipped_counts.get(topic).copied().unwrap_or(0);
         eprintln!(
-            "{}: {rows} rows",
+            "{}: {rows} rows ({skipped} malformed messages skipped)",
             args.csv.join(format!("{topic}.csv")).display()
         );
     }

@@ -294,6 +294,8 @@ pub fn state_from(v: &Value) -> Result<JointState> {
 pub struct Recorded {
     pub log_time: u64,
     pub publish_time: u64,
+    /// Position among the topic's messages in the file (malformed ones included).
+    pub index: usize,
     pub value: Value,
 }
 
@@ -302,14 +304,48 @@ pub struct Recorded {
 pub struct Recording {
     pub topics: BTreeMap<String, Vec<Recorded>>,
     pub attachments: BTreeMap<String, Vec<u8>>,
+    /// Messages left out as malformed, per topic: (position among the topic's messages in
+    /// the file, why). Filled only by the readers that skip them
+    /// ([`Recording::read_skipping_malformed`], [`Recording::parse_skipping`]).
+    pub malformed: BTreeMap<String, Vec<(usize, String)>>,
 }
 
 impl Recording {
     /// Reads `path`; every message must be JSON on a known channel.
     pub fn read(path: &Path) -> Result<Self> {
+        Self::read_with(path, false)
+    }
+
+    /// Reads `path` like [`Recording::read`], but a message that is not valid JSON is
+    /// left out and noted in [`Recording::malformed`] instead of failing the whole file
+    /// (for `export` and `plot`; `replay` compares every message and stays strict).
+    pub fn read_skipping_malformed(path: &Path) -> Result<Self> {
+        Self::read_with(path, true)
+    }
+
+    /// One line per topic with malformed messages: how many were skipped, and the first.
+    pub fn malformed_report(&self, path: &Path) -> Vec<String> {
+        self.malformed
+            .iter()
+            .filter(|(_, v)| !v.is_empty())
+            .map(|(topic, v)| {
+                format!(
+                    "{}: skipped {} malformed `{topic}` message{} (first: message {}: {})",
+                    path.display(),
+                    v.len(),
+                    if v.len() == 1 { "" } else { "s" },
+                    v[0].0,
+                    v[0].1
+                )
+            })
+            .collect()
+    }
+
+    fn read_with(path: &Path, skip_malformed: bool) -> Result<Self> {
         let what = || path.display().to_string();
         let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", what()))?;
         let mut rec = Recording::default();
+        let mut per_topic: BTreeMap<String, usize> = BTreeMap::new();
         let stream = mcap::MessageStream::new(&bytes)
             .with_context(|| format!("{}: not an MCAP file", what()))?;
         for (i, m) in stream.enumerate() {
@@ -322,19 +358,31 @@ impl Recording {
                     m.channel.message_encoding
                 );
             }
-            let value: Value = serde_json::from_slice(&m.data).with_context(|| {
-                format!(
-                    "{}: message {i} on `{}` is not valid JSON",
+            let position = per_topic.entry(m.channel.topic.clone()).or_default();
+            let index = *position;
+            *position += 1;
+            let value: Value = match serde_json::from_slice(&m.data) {
+                Ok(v) => v,
+                Err(e) if skip_malformed => {
+                    rec.malformed
+                        .entry(m.channel.topic.clone())
+                        .or_default()
+                        .push((index, format!("not valid JSON: {e}")));
+                    continue;
+                }
+                Err(e) => bail!(
+                    "{}: message {i} on `{}` is not valid JSON: {e}",
                     what(),
                     m.channel.topic
-                )
-            })?;
+                ),
+            };
             rec.topics
                 .entry(m.channel.topic.clone())
                 .or_default()
                 .push(Recorded {
                     log_time: m.log_time,
                     publish_time: m.publish_time,
+                    index,
                     value,
                 });
         }
@@ -351,6 +399,31 @@ impl Recording {
     /// The messages of `topic` (empty if none were recorded).
     pub fn messages(&self, topic: &str) -> &[Recorded] {
         self.topics.get(topic).map_or(&[], Vec::as_slice)
+    }
+
+    /// Parses the messages of `topic` with `parse`, leaving out (and noting in
+    /// [`Recording::malformed`]) those it refuses.
+    pub fn parse_skipping<T>(&mut self, topic: &str, parse: fn(&Value) -> Result<T>) -> Vec<T> {
+        let mut out = Vec::with_capacity(self.messages(topic).len());
+        let mut bad = Vec::new();
+        for m in self.messages(topic) {
+            match parse(&m.value) {
+                Ok(v) => out.push(v),
+                Err(e) => bad.push((m.index, format!("{e:#}"))),
+            }
+        }
+        self.note_malformed(topic, bad);
+        out
+    }
+
+    /// Adds `bad` to the malformed messages of `topic`, in file order.
+    pub fn note_malformed(&mut self, topic: &str, bad: Vec<(usize, String)>) {
+        if bad.is_empty() {
+            return;
+        }
+        let v = self.malformed.entry(topic.to_string()).or_default();
+        v.extend(bad);
+        v.sort_by_key(|(i, _)| *i);
     }
 
     /// Parses every message of `topic` with `parse`, naming the file and message on error.

@@ -2,6 +2,7 @@
 //! (s since the first setpoint): `torque.png` (τ per joint), `tracking_error.png`
 //! (measured q − setpoint q at the same tick, per joint) and `latency.png` (setpoint
 //! stamp → torque stamp and → state stamp, µs). Drawn with the study's plot helpers.
+//! Malformed messages are left out and counted per topic (a warning on stderr).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -34,10 +35,13 @@ fn size(rows: usize) -> (u32, u32) {
 
 /// Draws the figures; returns the files written.
 pub fn plot(file: &Path, out: &Path) -> Result<Vec<PathBuf>> {
-    let rec = Recording::read(file)?;
-    let setpoints = rec.parse(file, "setpoint", setpoint_from)?;
-    let torques = rec.parse(file, "torque", torque_from)?;
-    let states = rec.parse(file, "state", state_from)?;
+    let mut rec = Recording::read_skipping_malformed(file)?;
+    let setpoints = rec.parse_skipping("setpoint", setpoint_from);
+    let torques = rec.parse_skipping("torque", torque_from);
+    let states = rec.parse_skipping("state", state_from);
+    for line in rec.malformed_report(file) {
+        eprintln!("warning: {line}");
+    }
     if setpoints.is_empty() || torques.is_empty() {
         bail!(
             "{}: no setpoints or no torques recorded ({} setpoints, {} torques): nothing to plot",

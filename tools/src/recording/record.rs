@@ -18,6 +18,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{BufWriter, Write as _};
+use std::os::unix::fs::OpenOptionsExt as _;
 use std::path::PathBuf;
 use std::sync::mpsc;
 
@@ -79,14 +80,15 @@ pub struct RecordSummary {
     pub config_attached: bool,
 }
 
-/// One received payload.
-#[derive(Clone, Copy)]
+/// One received payload (the status boxed: it is rare and several times larger than
+/// the cyclic payloads, which fill the writer's queue).
+#[derive(Clone)]
 enum Payload {
     Setpoint(JointSetpoint),
     Torque(TorqueCommand),
     State(JointState),
     Command(MotionCommand),
-    Status(ServiceStatus),
+    Status(Box<ServiceStatus>),
 }
 
 impl Payload {
@@ -289,10 +291,20 @@ impl Writer {
     }
 
     fn finish(mut self, instance: &str) -> Result<RecordSummary> {
-        let cfg = crate::supervisor::instance::state_dir()
-            .join(instance)
-            .join(CONFIG_ATTACHMENT);
-        if let Ok(data) = std::fs::read(&cfg) {
+        // Only from this user's private run directory, never through a symlink.
+        let data = crate::supervisor::instance::run_file(instance, CONFIG_ATTACHMENT)
+            .ok()
+            .and_then(|p| {
+                let mut f = std::fs::OpenOptions::new()
+                    .read(true)
+                    .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
+                    .open(p)
+                    .ok()?;
+                let mut data = Vec::new();
+                std::io::Read::read_to_end(&mut f, &mut data).ok()?;
+                Some(data)
+            });
+        if let Some(data) = data {
             let now = monotonic_ns();
             self.mcap
                 .attach(&mcap::Attachment {
@@ -405,7 +417,10 @@ pub fn main(args: RecordArgs) -> Result<()> {
         );
     }
     if let Some(path) = &args.ready_file {
-        File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+        // A new file (a stale one removed first), owner-only, never through a symlink.
+        let _ = std::fs::remove_file(path);
+        crate::supervisor::instance::create_private_new(path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
     }
     println!("recording {}", args.out.display());
     let _ = std::io::stdout().flush();
@@ -437,7 +452,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
         drain(&tq, Payload::Torque, &tx, &mut on_payload);
         drain(&st, Payload::State, &tx, &mut on_payload);
         drain(&cm, Payload::Command, &tx, &mut on_payload);
-        drain(&ss, Payload::Status, &tx, &mut on_payload);
+        drain(&ss, |m| Payload::Status(Box::new(m)), &tx, &mut on_payload);
         let _ = timer.read_expirations();
         let now = monotonic_ns();
         if shutdown.is_requested() || end.is_some_and(|e| now >= e) {
@@ -457,7 +472,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
     drain(&tq, Payload::Torque, &tx, &mut on_payload);
     drain(&st, Payload::State, &tx, &mut on_payload);
     drain(&cm, Payload::Command, &tx, &mut on_payload);
-    drain(&ss, Payload::Status, &tx, &mut on_payload);
+    drain(&ss, |m| Payload::Status(Box::new(m)), &tx, &mut on_payload);
     drop(tx);
     let written = writer_thread
         .join()

@@ -72,7 +72,12 @@ impl StatusMonitor {
 
     /// Takes every waiting status; returns how many were new.
     pub fn poll(&mut self) -> anyhow::Result<usize> {
-        let mut n = 0;
+        Ok(self.poll_all()?.len())
+    }
+
+    /// Takes every waiting status; returns the new ones, oldest first.
+    pub fn poll_all(&mut self) -> anyhow::Result<Vec<ServiceStatus>> {
+        let mut new = Vec::new();
         loop {
             let st = match self.subscriber.receive() {
                 Ok(Some(sample)) => *sample,
@@ -97,9 +102,9 @@ impl StatusMonitor {
                 status: st,
                 at: Instant::now(),
             });
-            n += 1;
+            new.push(st);
         }
-        Ok(n)
+        Ok(new)
     }
 
     /// Forgets `role`'s statuses and ignores those stamped before `ns` (a restart).

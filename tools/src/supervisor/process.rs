@@ -1,9 +1,8 @@
 //! Child processes of the supervisor: spawned in their own process group (so a terminal
 //! Ctrl-C reaches only the supervisor, which then stops them in order) with
 //! `PR_SET_PDEATHSIG = SIGTERM` (so they stop if the supervisor dies, however it dies),
-//! output appended to a log file per service.
+//! output appended to a log file per service (owner-only, never through a symlink).
 
-use std::fs::OpenOptions;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -42,10 +41,7 @@ impl Service {
             .argv
             .split_first()
             .context("empty command for a service")?;
-        let log = OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&launch.log)
+        let log = super::instance::open_private_append(&launch.log)
             .with_context(|| format!("cannot open log file {}", launch.log.display()))?;
         let log_err = log
             .try_clone()
