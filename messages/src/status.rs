@@ -231,4 +231,9 @@ pub struct ServiceStatus {
     /// Why the last refused bus message (setpoint, torque or state) was refused (a
     /// [`RefusalReason`]).
     pub last_input_refusal: u32,
+    /// Actuator: the code of the backend's last fault (e.g. a CiA 402 drive's error code,
+    /// object 0x603F); 0 = none. The fault's text is in the service's log.
+    pub fault_code: u32,
+    /// Actuator: the joint of the backend's last fault, 1-based; 0 = none or the whole drive.
+    pub fault_joint: u32,
 }

@@ -39,7 +39,9 @@ fn status_layout_is_stable() {
     assert_eq!(offset_of!(ServiceStatus, estop_latency_max_ns), 328);
     assert_eq!(offset_of!(ServiceStatus, last_command_refusal), 336);
     assert_eq!(offset_of!(ServiceStatus, last_input_refusal), 340);
-    assert_eq!(size_of::<ServiceStatus>(), 344);
+    assert_eq!(offset_of!(ServiceStatus, fault_code), 344);
+    assert_eq!(offset_of!(ServiceStatus, fault_joint), 348);
+    assert_eq!(size_of::<ServiceStatus>(), 352);
     assert_eq!(align_of::<ServiceStatus>(), 8);
 }
 
