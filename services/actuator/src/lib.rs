@@ -387,16 +387,16 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
     /// measured position at the end of the period the command was computed for, against
     /// setpoint k's position — the same logical time (tick k) in lockstep.
     ///
-    /// Free-running, a command older than `stale_ms` at `now_ns` is never applied: the
-    /// step holds instead (as [`ActuatorCore::check_watchdog`] would have switched).
+    /// Free-running, a command stamped `stale_ms` or more before `now_ns` is never
+    /// applied: the step holds instead (as [`ActuatorCore::check_watchdog`] switches
+    /// when no command arrived for that long).
     pub fn step(&mut self, now_ns: u64) -> JointState {
         if !self.lockstep {
             self.last_step_ns = Some(now_ns);
             if self.safety.mode() == Mode::Command
                 && self
-                    .watchdog
-                    .age_ns(now_ns)
-                    .is_some_and(|a| a >= self.stale_ns)
+                    .latest
+                    .is_some_and(|c| now_ns.saturating_sub(c.header.stamp_ns) >= self.stale_ns)
             {
                 self.safety.on_stale(&self.last_measured.q);
             }
