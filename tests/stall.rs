@@ -56,10 +56,7 @@ fn a_frozen_actuator_wakes_holding_without_a_lurch_and_flags_the_stall() {
     let lim = Limits::seed_arm();
 
     let mut wakes = Vec::new();
-    for (stall_ms, target) in [
-        (300, "40,40,40,40,40,40"),
-        (2000, "-20,-20,10,-20,-20,-20"),
-    ] {
+    for (stall_ms, target) in [(300, "40,40,40,40,40,40"), (2000, "-20,-20,10,-20,-20,-20")] {
         let mv = send(&inst, &cfg, &["move", "--deg", "--joints", target]);
         assert_eq!(mv.code(), Some(0), "move: {}", mv.stderr);
         // Mid-motion: the time-optimal 40-60° moves of the slow joints take 3 s or more.
@@ -83,8 +80,8 @@ fn a_frozen_actuator_wakes_holding_without_a_lurch_and_flags_the_stall() {
     // 1. No lurch: every recorded velocity within 1.1x the joint's limit.
     let mut worst = vec![0.0f64; lim.dof];
     for s in st {
-        for j in 0..lim.dof {
-            worst[j] = worst[j].max(s.qd[j].abs() / lim.vel[j]);
+        for (j, w) in worst.iter_mut().enumerate() {
+            *w = w.max(s.qd[j].abs() / lim.vel[j]);
         }
     }
     eprintln!("largest |qd| / velocity limit per joint: {worst:.3?}");

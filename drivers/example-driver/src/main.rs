@@ -51,7 +51,7 @@ impl ActuatorBackend for RigidArm {
         self.q += self.qd * dt;
         self.tau = *tau;
         for (i, j) in self.robot.joints().iter().enumerate() {
-            if !(self.qd[i].abs() <= 2.0 * j.limits.velocity) {
+            if self.qd[i].is_nan() || self.qd[i].abs() > 2.0 * j.limits.velocity {
                 return Err(Fault::joint(
                     i,
                     0x8400,
