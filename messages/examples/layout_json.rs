@@ -135,7 +135,9 @@ fn main() {
             refusal_value,
             refusal_min,
             refusal_max,
-            command_verdicts
+            command_verdicts,
+            fault_code,
+            fault_joint
         }),
         layout!(CommandVerdict {
             seq,

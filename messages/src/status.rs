@@ -485,6 +485,11 @@ pub struct ServiceStatus {
     /// before it) is at index `n % COMMAND_VERDICTS`. Each sender finds its own command
     /// by publisher id and `seq` (see [`ServiceStatus::command_verdict`]).
     pub command_verdicts: [CommandVerdict; COMMAND_VERDICTS],
+    /// Actuator: the code of the backend's last fault (e.g. a CiA 402 drive's error code,
+    /// object 0x603F); 0 = none. The fault's text is in the service's log.
+    pub fault_code: u32,
+    /// Actuator: the joint of the backend's last fault, 1-based; 0 = none or the whole drive.
+    pub fault_joint: u32,
 }
 
 impl ServiceStatus {

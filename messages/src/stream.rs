@@ -144,4 +144,8 @@ pub mod state_flags {
     /// ticking on states does not tick on it, and in lockstep the dynamics does not use
     /// it as feedback (so where a run stops never changes what it computed).
     pub const FINAL: u32 = 1 << 4;
+    /// The actuator's process stalled (frozen or late) for longer than `stale_ms`: the
+    /// missed plant periods were not replayed and it holds with its own law until a
+    /// torque command computed from a state published after the stall arrives.
+    pub const STALLED: u32 = 1 << 5;
 }

@@ -53,7 +53,9 @@ fn status_layout_is_stable() {
     assert_eq!(offset_of!(CommandVerdict, refusal), 24);
     assert_eq!(size_of::<CommandVerdict>(), 32);
     assert_eq!(COMMAND_VERDICTS, 16);
-    assert_eq!(size_of::<ServiceStatus>(), 392 + 16 * 32);
+    assert_eq!(offset_of!(ServiceStatus, fault_code), 904);
+    assert_eq!(offset_of!(ServiceStatus, fault_joint), 908);
+    assert_eq!(size_of::<ServiceStatus>(), 912);
     assert_eq!(align_of::<ServiceStatus>(), 8);
 }
 

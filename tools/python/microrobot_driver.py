@@ -130,7 +130,8 @@ class ServiceStatus(ctypes.Structure):
                 ("refusal_joint", ctypes.c_uint32), ("refusal_quantity", ctypes.c_uint32),
                 ("refusal_value", ctypes.c_double), ("refusal_min", ctypes.c_double),
                 ("refusal_max", ctypes.c_double),
-                ("command_verdicts", CommandVerdict * COMMAND_VERDICTS)]
+                ("command_verdicts", CommandVerdict * COMMAND_VERDICTS),
+                ("fault_code", ctypes.c_uint32), ("fault_joint", ctypes.c_uint32)]
 
 
 @_named("MasterPose")

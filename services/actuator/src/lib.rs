@@ -11,30 +11,38 @@
 //!   runs the watchdog (and the plant, once the safe state has latched).
 //!
 //! The loop logic lives in [`ActuatorCore`] (no IPC), so an in-process replay of the
-//! sampled loop runs exactly the code the process runs.
+//! sampled loop runs exactly the code the process runs; [`serve`] is the process around
+//! it, for any [`ActuatorBackend`] (the simulated arm's [`run`] is one call of it).
+//!
+//! A stall (the process frozen or late for longer than `stale_ms`, free-running): the
+//! missed plant periods are not replayed, the actuator holds with its own law from the
+//! measured state (flag `STALLED`), and it follows torque commands again only once one
+//! arrives that was computed from a state it published after the stall — never one
+//! older than `stale_ms`, never one that answers a state from before the stall. A stall
+//! longer than `fault_ms` latches the safe state like any other silence that long. See
+//! [`ActuatorCore::on_wake`].
 
 pub mod backend;
+pub mod lifecycle;
 pub mod resume;
 pub mod safety;
+mod serve;
 pub mod sim;
 
-use anyhow::Context as _;
-use iceoryx2::port::update_connections::UpdateConnections;
 use microrobot_messages::{
-    CommandKind, Header, JointSetpoint, JointState, LifecycleState, MAX_JOINTS, MotionCommand,
-    ServiceKind, ServiceRole, ServiceStatus, TorqueCommand, monotonic_ns, open_event,
-    open_publish_subscribe, state_flags,
+    Header, JointState, LifecycleState, MAX_JOINTS, TorqueCommand, state_flags, torque_flags,
 };
 use microrobot_model::{JointKind, JointVector, Robot};
 use microrobot_runtime::config::PipelineConfig;
-use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::{Refusal, SeqTracker, check_fresh, check_torque};
 use microrobot_runtime::watchdog::{Freshness, Watchdog};
-use microrobot_runtime::{BadConfig, PeriodicClock, Reactor, Shutdown, StatusPort, open_node};
+use microrobot_runtime::{BadConfig, Shutdown};
 
-pub use backend::{ActuatorBackend, BackendError, Measured};
+pub use backend::{ActuatorBackend, Fault, Measured};
+pub use lifecycle::Lifecycle;
 pub use resume::{RESUME_ENV, ResumeState};
 pub use safety::{Mode, Safety};
+pub use serve::{Setup, StartFrom, StartState, serve};
 pub use sim::SimArm;
 
 /// Cumulative counters of the actuator (reported in its status).
@@ -54,11 +62,13 @@ pub struct Counters {
     pub faults: u64,
     /// Reset commands refused (e.g. commands not fresh yet).
     pub resets_refused: u64,
+    /// Stalls: the loop did not run for longer than `stale_ms` (free-running).
+    pub stalls: u64,
 }
 
 /// The actuator's loop logic, independent of IPC and clocks (time is passed in).
 pub struct ActuatorCore<B: ActuatorBackend> {
-    backend: B,
+    hw: Lifecycle<B>,
     safety: Safety,
     dof: usize,
     period_s: f64,
@@ -72,6 +82,13 @@ pub struct ActuatorCore<B: ActuatorBackend> {
     steps_on_latest: u64,
     state_seq: u64,
     last_measured: Measured,
+    /// Backend faults already counted in `counters.faults`.
+    hw_faults_counted: u64,
+    /// Wall time of the last plant step (free-running stall detection).
+    last_step_ns: Option<u64>,
+    /// After a stall: the first state published after it; commands answering an older
+    /// state are not followed. `None` when no stall is pending.
+    resync_state_seq: Option<u64>,
     /// Counters for the status.
     pub counters: Counters,
     /// Largest |q_measured − q_desired| per joint (see [`ActuatorCore::step`]).
@@ -83,15 +100,36 @@ pub struct ActuatorCore<B: ActuatorBackend> {
 }
 
 impl<B: ActuatorBackend> ActuatorCore<B> {
-    /// A core around a configured-or-not `backend`, with the nominal `model` for the
-    /// safety layer's own control law.
-    pub fn new(mut backend: B, model: &Robot, cfg: &PipelineConfig) -> Result<Self, BackendError> {
-        if backend.lifecycle() == LifecycleState::Unconfigured {
-            backend.configure()?;
+    /// A core around an unconfigured `backend` (configured here), with the nominal
+    /// `model` for the safety layer's own control law. Refuses a backend that drives
+    /// another number of joints than `model` has.
+    pub fn new(backend: B, model: &Robot, cfg: &PipelineConfig) -> Result<Self, Fault> {
+        if backend.dof() != model.dof() {
+            return Err(Fault {
+                joint: None,
+                code: 0,
+                text: format!(
+                    "the backend drives {} joints, the robot `{}` has {}",
+                    backend.dof(),
+                    model.name(),
+                    model.dof()
+                )
+                .into(),
+            });
         }
+        let mut hw = Lifecycle::new(backend);
+        hw.configure()?;
         let period_s = 1.0 / cfg.rate_hz;
         let ramp_steps = (cfg.watchdog.ramp_ms * 1e-3 / period_s).ceil() as u32;
-        let last_measured = backend.read()?;
+        let last_measured = match hw.read(0) {
+            Some(m) => m,
+            None => {
+                return Err(hw
+                    .last_fault()
+                    .cloned()
+                    .unwrap_or_else(|| Fault::drive(0, "the first read failed")));
+            }
+        };
         let mut slope = JointVector::repeat(f64::INFINITY);
         if cfg.actuator.torque_slope_ms > 0.0 {
             let steps_per_full_scale = cfg.actuator.torque_slope_ms * 1e-3 / period_s;
@@ -100,7 +138,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             }
         }
         Ok(Self {
-            dof: backend.dof(),
+            dof: model.dof(),
             safety: Safety::new(
                 model,
                 cfg.actuator.hold_kp_per_s2,
@@ -109,7 +147,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                 ramp_steps,
             )
             .with_slope(&slope),
-            backend,
+            hw,
             period_s,
             lockstep: cfg.lockstep,
             auto_resume: cfg.watchdog.auto_resume,
@@ -121,6 +159,9 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             steps_on_latest: 0,
             state_seq: 0,
             last_measured,
+            hw_faults_counted: 0,
+            last_step_ns: None,
+            resync_state_seq: None,
             counters: Counters::default(),
             tracking_error_max: [0.0; MAX_JOINTS],
             peak_torque: [0.0; MAX_JOINTS],
@@ -130,7 +171,30 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
 
     /// The backend (e.g. to read the simulation's true state).
     pub fn backend(&self) -> &B {
-        &self.backend
+        self.hw.backend()
+    }
+
+    /// The backend's last fault (kept after a reset, for the status).
+    pub fn last_fault(&self) -> Option<&Fault> {
+        self.hw.last_fault()
+    }
+
+    /// Faults the backend entered so far.
+    pub fn backend_faults(&self) -> u64 {
+        self.hw.faults()
+    }
+
+    /// Whether a stall is pending: holding until a command computed from a state
+    /// published after it arrives.
+    pub fn stalled(&self) -> bool {
+        self.resync_state_seq.is_some()
+    }
+
+    /// Counts backend faults not counted yet.
+    fn count_backend_faults(&mut self) {
+        let n = self.hw.faults();
+        self.counters.faults += n - self.hw_faults_counted;
+        self.hw_faults_counted = n;
     }
 
     /// Sequence gaps seen on the torque stream.
@@ -155,13 +219,16 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         if self.safety.latched() {
             LifecycleState::Fault
         } else {
-            self.backend.lifecycle()
+            self.hw.state()
         }
     }
 
     /// Validates a received torque command (from iceoryx2 publisher `publisher`) and,
     /// when good, makes it the command to apply. Freshness is judged on the wall clock
-    /// only when not in lockstep (in lockstep the logical tick governs).
+    /// only when not in lockstep (in lockstep the logical tick governs). After a stall
+    /// ([`ActuatorCore::on_wake`]) a command that answers a state from before it (or that
+    /// the dynamics computed without feedback it wanted: `STATE_STALE`) is refused as
+    /// stale: it would correct an error the arm no longer has.
     pub fn accept_torque(
         &mut self,
         msg: &TorqueCommand,
@@ -176,18 +243,32 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                     check_fresh(msg.header.stamp_ns, now_ns, self.stale_ns)
                 }
             })
-            .and_then(|()| self.seq.accept(publisher, msg.header.seq, now_ns));
+            .and_then(|()| self.seq.accept(publisher, msg.header.seq, now_ns))
+            .and_then(|()| match self.resync_state_seq {
+                Some(first) if !self.lockstep => {
+                    let wanted_feedback_missing = msg.flags & torque_flags::STATE_STALE != 0;
+                    let answers_old_state = msg.state_seq != u64::MAX && msg.state_seq < first;
+                    if wanted_feedback_missing || answers_old_state {
+                        Err(Refusal::Stale)
+                    } else {
+                        self.resync_state_seq = None;
+                        Ok(())
+                    }
+                }
+                _ => Ok(()),
+            });
         match r {
             Ok(()) => {
                 self.latest = Some(*msg);
                 self.latest_unapplied = true;
                 self.watchdog.feed(now_ns);
-                if self.backend.lifecycle() == LifecycleState::Inactive
+                if self.hw.state() == LifecycleState::Inactive
                     && !self.safety.latched()
-                    && self.backend.activate().is_ok()
+                    && self.hw.activate()
                 {
                     self.safety.on_switch_on();
                 }
+                self.count_backend_faults();
                 Ok(())
             }
             Err(e) => {
@@ -219,7 +300,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                 }
             }
             Freshness::Fault => {
-                if !self.safety.latched() && self.backend.lifecycle() == LifecycleState::Active {
+                if !self.safety.latched() && self.hw.state() == LifecycleState::Active {
                     self.counters.faults += 1;
                     self.safety.on_fault(&q);
                 }
@@ -231,9 +312,10 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
     /// fresh, and acknowledges a backend fault. Returns whether anything was reset.
     pub fn reset(&mut self, now_ns: u64) -> bool {
         let mut did = false;
-        if self.backend.lifecycle() == LifecycleState::Fault && self.backend.reset_fault().is_ok() {
+        if self.hw.state() == LifecycleState::Fault && self.hw.reset_fault() {
             did = true;
         }
+        self.count_backend_faults();
         if self.safety.latched() {
             if self.watchdog.check(now_ns) == Freshness::Fresh {
                 self.safety.reset(&self.last_measured.q);
@@ -255,13 +337,39 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         }
         self.safety.blend_from(&t);
         if latch {
-            if self.backend.lifecycle() == LifecycleState::Inactive {
-                let _ = self.backend.activate();
+            if self.hw.state() == LifecycleState::Inactive {
+                let _ = self.hw.activate();
+                self.count_backend_faults();
             }
             self.counters.faults += 1;
             self.safety.on_fault(&self.last_measured.q);
             // `on_fault` blends from the last applied torque, which is `t`.
         }
+    }
+
+    /// Free-running: call first on every wake-up of the loop at `now_ns`, before any
+    /// torque command is accepted. When the loop has not stepped the plant for longer
+    /// than `stale_ms` (the process was frozen, or not scheduled), this is a stall:
+    /// counted, flagged `STALLED` on the states until a command answering a state
+    /// published after it arrives, and judged by the watchdog now, before the commands
+    /// queued during the stall could feed it — so the actuator holds with its own law
+    /// (or latches the safe state if the silence reached `fault_ms`). The missed
+    /// periods are not replayed: the stage drops every timer tick older than
+    /// `stale_ms`. Returns the stall's length in ns. Lockstep has no stalls: logical
+    /// time waits for the actuator.
+    pub fn on_wake(&mut self, now_ns: u64) -> Option<u64> {
+        if self.lockstep {
+            return None;
+        }
+        let gap = now_ns.saturating_sub(self.last_step_ns?);
+        if gap <= self.stale_ns {
+            return None;
+        }
+        self.last_step_ns = Some(now_ns);
+        self.counters.stalls += 1;
+        self.resync_state_seq = Some(self.state_seq + 1);
+        self.check_watchdog(now_ns);
+        Some(gap)
     }
 
     /// Whether the plant is stepped by the actuator's own timer (free-running, or the
@@ -278,8 +386,22 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
     /// |q measured after the step − q_desired of command k| per joint, i.e. the
     /// measured position at the end of the period the command was computed for, against
     /// setpoint k's position — the same logical time (tick k) in lockstep.
+    ///
+    /// Free-running, a command stamped `stale_ms` or more before `now_ns` is never
+    /// applied: the step holds instead (as [`ActuatorCore::check_watchdog`] switches
+    /// when no command arrived for that long).
     pub fn step(&mut self, now_ns: u64) -> JointState {
-        let active = self.backend.lifecycle() == LifecycleState::Active;
+        if !self.lockstep {
+            self.last_step_ns = Some(now_ns);
+            if self.safety.mode() == Mode::Command
+                && self
+                    .latest
+                    .is_some_and(|c| now_ns.saturating_sub(c.header.stamp_ns) >= self.stale_ns)
+            {
+                self.safety.on_stale(&self.last_measured.q);
+            }
+        }
+        let active = self.hw.state() == LifecycleState::Active;
         let use_cmd = self.safety.mode() == Mode::Command && self.latest.is_some();
         let mut fresh_cmd = None;
         if active {
@@ -290,9 +412,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             if self.safety.slope_limited() {
                 self.counters.slope_limited_cycles += 1;
             }
-            if self.backend.write(&tau, self.period_s).is_err() {
-                self.counters.faults += 1;
-            }
+            self.hw.write(now_ns, self.period_s, &tau);
             if use_cmd && self.latest_unapplied {
                 fresh_cmd = self.latest;
                 self.steps_on_latest = 0;
@@ -300,9 +420,10 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             self.steps_on_latest += 1;
             self.latest_unapplied = false;
         }
-        if let Ok(m) = self.backend.read() {
+        if let Some(m) = self.hw.read(now_ns) {
             self.last_measured = m;
         }
+        self.count_backend_faults();
         let m = self.last_measured;
         self.counters.cycles += 1;
         if active && !use_cmd {
@@ -326,18 +447,18 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
     }
 
     /// Shutdown: the backend goes Inactive (drives disabled, brakes on) if it was
-    /// active, and the returned last state message says so (lifecycle Inactive). Called
-    /// on every clean stop, including SIGTERM from a dead supervisor (PDEATHSIG).
+    /// active, and the returned last state message says so (lifecycle Inactive); then
+    /// the backend's `on_shutdown`. Called on every clean stop, including SIGTERM from a
+    /// dead supervisor (PDEATHSIG).
     pub fn shutdown(&mut self, now_ns: u64) -> JointState {
-        if self.backend.lifecycle() == LifecycleState::Active && self.backend.deactivate().is_err()
-        {
-            self.counters.faults += 1;
-        }
-        if let Ok(m) = self.backend.read() {
+        self.hw.deactivate();
+        if let Some(m) = self.hw.read(now_ns) {
             self.last_measured = m;
         }
+        self.count_backend_faults();
         let mut s = self.state_message(now_ns);
         s.flags |= state_flags::FINAL;
+        self.hw.finalize();
         s
     }
 
@@ -377,6 +498,9 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         if self.safety.slope_limited() {
             s.flags |= state_flags::SLOPE_LIMITED;
         }
+        if self.resync_state_seq.is_some() {
+            s.flags |= state_flags::STALLED;
+        }
         s
     }
 }
@@ -401,226 +525,15 @@ pub fn load_robot(cfg: &PipelineConfig) -> anyhow::Result<Robot> {
     Robot::from_file(&cfg.robot).map_err(|e| BadConfig(format!("robot file: {e}")).into())
 }
 
-/// How long a (re)started actuator listens for the planner's last setpoint to resume
-/// the arm where it was instead of at `initial_q_deg`.
-const RESUME_PROBE_MS: u64 = 200;
-
-/// The actuator service (`microrobot service actuator`).
+/// The actuator service with the simulated arm (`microrobot service actuator`): [`serve`]
+/// with a [`SimArm`] started where [`Setup::start`] says the arm is.
 pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
-    let robot = load_robot(cfg)?;
-    let dof = robot.dof();
-    let inst = cfg.instance.as_str();
-    let node = open_node(inst, ServiceRole::Actuator)?;
-
-    let torque_sub = open_publish_subscribe::<TorqueCommand>(&node, inst, ServiceKind::Torque)?
-        .subscriber_builder()
-        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
-        .history_request(0)
-        .create()
-        .map_err(|e| anyhow::anyhow!("torque subscriber: {e:?}"))?;
-    let torque_listener = open_event(&node, inst, ServiceKind::Torque)?
-        .listener_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("torque listener: {e:?}"))?;
-    let state_pub = open_publish_subscribe::<JointState>(&node, inst, ServiceKind::State)?
-        .publisher_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("state publisher: {e:?}"))?;
-    let state_notifier = open_event(&node, inst, ServiceKind::State)?
-        .notifier_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("state notifier: {e:?}"))?;
-    let cmd_sub = open_publish_subscribe::<MotionCommand>(&node, inst, ServiceKind::Command)?
-        .subscriber_builder()
-        .history_request(0)
-        .create()
-        .map_err(|e| anyhow::anyhow!("command subscriber: {e:?}"))?;
-    let cmd_listener = open_event(&node, inst, ServiceKind::Command)?
-        .listener_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("command listener: {e:?}"))?;
-    let sp_sub = open_publish_subscribe::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?
-        .subscriber_builder()
-        .history_request(1)
-        .create()
-        .map_err(|e| anyhow::anyhow!("setpoint subscriber: {e:?}"))?;
-    let mut status = StatusPort::open(&node, inst, ServiceRole::Actuator, cfg.status_period_ms)?;
-
-    // Resume where the arm is: the predecessor's last published state (handed over by
-    // the supervisor after a restart), else a running planner's last setpoint, else the
-    // config.
-    let resume = ResumeState::from_env(&robot).map_err(BadConfig)?;
-    let mut q0 = initial_q(&robot, cfg);
-    if let Some(r) = &resume {
-        q0 = r.q;
-        tracing::info!(
-            "actuator: restarted; resuming the arm at its last published state{}",
-            if cfg.watchdog.auto_resume {
-                ""
-            } else {
-                " in the safe state (send a reset to resume)"
-            }
-        );
-    }
-    let probe_end = monotonic_ns() + RESUME_PROBE_MS * 1_000_000;
-    'probe: while resume.is_none() && monotonic_ns() < probe_end && !shutdown.is_requested() {
-        while let Ok(Some(s)) = sp_sub.receive() {
-            if s.dof as usize == dof && microrobot_messages::all_finite(&s.q, s.dof) {
-                q0 = JointVector::from_column_slice(&s.q);
-                tracing::info!("actuator: resuming the arm at the planner's last setpoint");
-                break 'probe;
-            }
+    serve(cfg, shutdown, |setup: &Setup| {
+        let start = &setup.start;
+        let mut sim = SimArm::new(setup.robot, &setup.cfg.actuator.sim, &start.q);
+        if start.from == StartFrom::Restart {
+            sim.set_state(&start.q, &start.qd);
         }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    drop(sp_sub);
-
-    let mut sim = SimArm::new(&robot, &cfg.actuator.sim, &q0);
-    if let Some(r) = &resume {
-        sim.set_state(&r.q, &r.qd);
-    }
-    let mut core = ActuatorCore::new(sim, &robot, cfg).context("simulated arm")?;
-    if let Some(r) = &resume {
-        core.resume_after_restart(&r.tau, !cfg.watchdog.auto_resume);
-    }
-    let mut e2e = LatencyHistogram::new();
-
-    let PeriodicClock { timer, mut ticker } =
-        PeriodicClock::start(cfg.period_ns(), cfg.realtime.overrun)?;
-    let mut reactor = Reactor::new().context("epoll")?;
-    let on_torque = reactor.add(&torque_listener).context("epoll")?;
-    let on_command = reactor.add(&cmd_listener).context("epoll")?;
-    let on_timer = reactor.add(&timer).context("epoll")?;
-    let on_stop = reactor.add(shutdown).context("epoll")?;
-
-    // Free-running with the planner on its own timer, the plant steps are phased half a
-    // period after the planner's ticks (below). When the planner ticks on states, this
-    // timer is the pipeline's master clock and is left where it is.
-    let mut phased = cfg.planner_ticks_on_states();
-    let publish = |s: JointState| {
-        let ok = state_pub.send_copy(s).is_ok();
-        let _ = state_notifier.notify();
-        ok
-    };
-    // Initial state (history 1 on State: the planner starts from it).
-    publish(core.state_message(monotonic_ns()));
-
-    let mut st = ServiceStatus {
-        ready: 1,
-        ..Default::default()
-    };
-    let fill = |st: &mut ServiceStatus,
-                core: &ActuatorCore<SimArm>,
-                e2e: &LatencyHistogram,
-                ticker_misses: u64| {
-        st.lifecycle = core.lifecycle() as u32;
-        st.cycles = core.counters.cycles;
-        st.deadline_misses = ticker_misses;
-        st.lost_messages = core.lost_messages();
-        st.refused_messages = core.counters.refused + core.counters.resets_refused;
-        st.stale_cycles = core.counters.stale_cycles;
-        st.clamped_cycles = core.counters.saturated_cycles + core.counters.slope_limited_cycles;
-        st.faults = core.counters.faults;
-        st.motion_time_s = core.motion_time_s();
-        st.latency = e2e.summary();
-        st.tracking_error_max = core.tracking_error_max;
-        st.peak_torque = core.peak_torque;
-        st.last_input_refusal = core
-            .last_refusal
-            .map_or(microrobot_messages::RefusalReason::None, Refusal::reason)
-            as u32;
-    };
-    fill(&mut st, &core, &e2e, 0);
-    status.publish(monotonic_ns(), &mut st);
-
-    // Set up: from here on the loop runs pinned and SCHED_FIFO.
-    microrobot_runtime::enter_cycle(cfg);
-    while !shutdown.is_requested() {
-        let ready = reactor.wait().context("epoll_wait")?;
-        if ready.contains(on_stop) || shutdown.is_requested() {
-            break;
-        }
-        if ready.contains(on_torque) {
-            let _ = torque_listener.try_wait(|_| {});
-            while let Ok(Some(sample)) = torque_sub.receive() {
-                let msg = *sample;
-                let publisher = sample.header().publisher_id().value();
-                drop(sample);
-                let now = monotonic_ns();
-                if core.accept_torque(&msg, publisher, now).is_ok() {
-                    e2e.record(now.saturating_sub(msg.header.source_stamp_ns));
-                    if !cfg.lockstep && !phased {
-                        // Free-running: put the plant steps half a period after the
-                        // planner's ticks, so torque k is applied in the step that ends
-                        // before setpoint k+1 (the same one-period loop delay as lockstep).
-                        phased = true;
-                        let p = cfg.period_ns();
-                        let mut first = msg.header.source_stamp_ns + p / 2;
-                        while first <= now {
-                            first += p;
-                        }
-                        if timer.arm_absolute(first, p).is_ok() {
-                            let _ = timer.read_expirations();
-                            ticker =
-                                microrobot_runtime::Ticker::new(first, p, cfg.realtime.overrun);
-                        }
-                    }
-                    if !core.steps_on_timer() {
-                        core.check_watchdog(now);
-                        publish(core.step(monotonic_ns()));
-                    }
-                }
-            }
-        }
-        // Drained on every wake-up (see the planner: a new sender's sample can become
-        // visible after its notification).
-        {
-            if ready.contains(on_command) {
-                let _ = cmd_listener.try_wait(|_| {});
-            }
-            while let Ok(Some(sample)) = cmd_sub.receive() {
-                if CommandKind::from_wire(sample.kind) == Some(CommandKind::Reset)
-                    && core.reset(monotonic_ns())
-                {
-                    tracing::info!("actuator: reset, following torque commands again");
-                }
-            }
-        }
-        if ready.contains(on_timer) {
-            ticker.on_expirations(timer.read_expirations());
-            // Hands the last state (history 1) to subscribers that joined since the last
-            // send: in lockstep nothing is sent until the first torque, and the planner
-            // starts from that state.
-            let _ = state_pub.update_connections();
-            let mut n = 0;
-            while ticker.next_tick().is_some() {
-                let now = monotonic_ns();
-                let was_latched = core.safe_state_latched();
-                core.check_watchdog(now);
-                if core.safe_state_latched() && !was_latched {
-                    tracing::warn!(
-                        "actuator: no valid torque command for {} ms: safe state latched ({:?}); send a reset to resume",
-                        cfg.watchdog.fault_ms,
-                        cfg.watchdog.safe_state
-                    );
-                }
-                if core.steps_on_timer() && n < 100 {
-                    publish(core.step(now));
-                    n += 1;
-                }
-            }
-        }
-        let now = monotonic_ns();
-        if status.due(now) {
-            fill(&mut st, &core, &e2e, 0);
-            status.publish(now, &mut st);
-        }
-    }
-    // Safe on the way out, however the stop was asked for (Ctrl-C, SIGTERM, the
-    // supervisor's death): brakes on, and the last state says so.
-    publish(core.shutdown(monotonic_ns()));
-    tracing::info!("actuator: stopped, backend inactive (drives disabled)");
-    fill(&mut st, &core, &e2e, 0);
-    status.publish_final(&mut st);
-    Ok(())
+        Ok(sim)
+    })
 }

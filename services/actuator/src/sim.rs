@@ -10,15 +10,19 @@
 //!   viscous and Coulomb friction the dynamics does not know.
 //! * Hard stops at the position limits (the joint stops there, velocity into the stop zeroed).
 //! * Gaussian sensor noise on q and qd from a seeded generator (same seed, same noise).
-//! * Brakes: while Inactive the arm does not move.
+//! * Brakes: while the drives are off (before `on_activate`, after `on_deactivate` or a
+//!   fault) the framework writes no torque, so the arm does not move.
+//!
+//! A plain [`ActuatorBackend`]: the lifecycle and its guards are the framework's.
+//! Simulated time advances only in `write()`, one period per call: while the process is
+//! frozen the simulated arm is frozen with it (see [`crate::ActuatorCore::on_wake`]).
 //!
 //! Allocation-free after construction.
 
-use microrobot_messages::LifecycleState;
 use microrobot_model::{JointVector, ModelData, Robot, forward_dynamics};
 use microrobot_runtime::config::{Integrator, SimConfig};
 
-use crate::backend::{ActuatorBackend, BackendError, Measured};
+use crate::backend::{ActuatorBackend, Fault, Measured};
 
 /// SplitMix64 + Box-Muller: a tiny deterministic Gaussian source.
 #[derive(Debug, Clone)]
@@ -83,8 +87,8 @@ pub struct SimArm {
     rng: Gaussian,
     integrator: Integrator,
     substeps: u32,
-    lifecycle: LifecycleState,
-    fault: &'static str,
+    /// Drives on (between `on_activate` and `on_deactivate`/a fault): torque is applied.
+    enabled: bool,
 }
 
 impl SimArm {
@@ -123,8 +127,7 @@ impl SimArm {
             rng: Gaussian::new(cfg.seed),
             integrator: cfg.integrator,
             substeps: cfg.substeps.max(1),
-            lifecycle: LifecycleState::Unconfigured,
-            fault: "",
+            enabled: false,
         }
     }
 
@@ -137,11 +140,6 @@ impl SimArm {
     pub fn set_state(&mut self, q: &JointVector, qd: &JointVector) {
         self.q = *q;
         self.qd = *qd;
-    }
-
-    /// Why the simulation faulted (empty when it did not).
-    pub fn fault_reason(&self) -> &'static str {
-        self.fault
     }
 
     #[inline]
@@ -201,65 +199,39 @@ impl SimArm {
             }
         }
     }
-
-    fn wrong(&self, call: &'static str) -> BackendError {
-        BackendError::WrongState {
-            call,
-            state: self.lifecycle,
-        }
-    }
 }
+
+/// The simulation's fault code: forward dynamics diverged (manufacturer-specific range
+/// of the CiA 402 error codes).
+pub const FAULT_DIVERGED: u32 = 0xFF01;
 
 impl ActuatorBackend for SimArm {
     fn dof(&self) -> usize {
         self.dof
     }
 
-    fn lifecycle(&self) -> LifecycleState {
-        self.lifecycle
-    }
-
-    fn configure(&mut self) -> Result<(), BackendError> {
-        if self.lifecycle != LifecycleState::Unconfigured {
-            return Err(self.wrong("configure"));
-        }
-        self.lifecycle = LifecycleState::Inactive;
+    fn on_activate(&mut self) -> Result<(), Fault> {
+        self.enabled = true;
         Ok(())
     }
 
-    fn activate(&mut self) -> Result<(), BackendError> {
-        if self.lifecycle != LifecycleState::Inactive {
-            return Err(self.wrong("activate"));
-        }
-        self.lifecycle = LifecycleState::Active;
-        Ok(())
-    }
-
-    fn deactivate(&mut self) -> Result<(), BackendError> {
-        if self.lifecycle != LifecycleState::Active {
-            return Err(self.wrong("deactivate"));
-        }
+    fn on_deactivate(&mut self) -> Result<(), Fault> {
+        // Brakes on: the arm stops where it is.
         self.qd = JointVector::zeros();
-        self.lifecycle = LifecycleState::Inactive;
+        self.enabled = false;
         Ok(())
     }
 
-    fn reset_fault(&mut self) -> Result<(), BackendError> {
-        if self.lifecycle != LifecycleState::Fault {
-            return Err(self.wrong("reset_fault"));
-        }
+    fn on_error(&mut self, _fault: &Fault) {
+        self.enabled = false;
+    }
+
+    fn on_reset(&mut self) -> Result<(), Fault> {
         self.qd = JointVector::zeros();
-        self.fault = "";
-        self.lifecycle = LifecycleState::Inactive;
         Ok(())
     }
 
-    fn write(&mut self, tau: &JointVector, period_s: f64) -> Result<(), BackendError> {
-        match self.lifecycle {
-            LifecycleState::Active => {}
-            LifecycleState::Fault => return Err(BackendError::Fault(self.fault)),
-            _ => return Err(self.wrong("write")),
-        }
+    fn write(&mut self, _now_ns: u64, period_s: f64, tau: &JointVector) -> Result<(), Fault> {
         let mut t = JointVector::zeros();
         self.saturated = false;
         for i in 0..self.dof {
@@ -282,22 +254,20 @@ impl ActuatorBackend for SimArm {
             // Keep the last good state; the arm is "stuck" until a fault reset.
             self.q = q0;
             self.qd = qd0;
-            self.fault = "forward dynamics diverged (singular mass matrix or non-finite state)";
-            self.lifecycle = LifecycleState::Fault;
-            return Err(BackendError::Fault(self.fault));
+            return Err(Fault::drive(
+                FAULT_DIVERGED,
+                "forward dynamics diverged (singular mass matrix or non-finite state)",
+            ));
         }
         self.tau_applied = t;
         Ok(())
     }
 
-    fn read(&mut self) -> Result<Measured, BackendError> {
-        if self.lifecycle == LifecycleState::Unconfigured {
-            return Err(self.wrong("read"));
-        }
+    fn read(&mut self, _now_ns: u64) -> Result<Measured, Fault> {
         let mut m = Measured {
             q: self.q,
             qd: self.qd,
-            tau_applied: if self.lifecycle == LifecycleState::Active {
+            tau_applied: if self.enabled {
                 self.tau_applied
             } else {
                 JointVector::zeros()
@@ -347,8 +317,8 @@ link = {{ mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0
 
     fn active(robot: &Robot, cfg: &SimConfig) -> SimArm {
         let mut s = SimArm::new(robot, cfg, &JointVector::zeros());
-        s.configure().unwrap();
-        s.activate().unwrap();
+        s.on_configure().unwrap();
+        s.on_activate().unwrap();
         s
     }
 
@@ -364,7 +334,7 @@ link = {{ mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0
             let mut tau = JointVector::zeros();
             tau[0] = 1.0;
             for _ in 0..1000 {
-                s.write(&tau, 1e-3).unwrap();
+                s.write(0, 1e-3, &tau).unwrap();
             }
             let (q, qd) = s.true_state();
             assert!((q[0] - 2.0).abs() < tol, "{integ:?}: q = {}", q[0]);
@@ -386,7 +356,7 @@ link = {{ mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0
         let dt = 1e-3;
         let n = 2000;
         for _ in 0..n {
-            s.write(&JointVector::zeros(), dt).unwrap();
+            s.write(0, dt, &JointVector::zeros()).unwrap();
         }
         let expect = -std::f64::consts::FRAC_PI_2 + amp * (omega * dt * n as f64).cos();
         let (q, _) = s.true_state();
@@ -400,8 +370,8 @@ link = {{ mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0
         let mut s = active(&robot, &sim_cfg(Integrator::Rk4, 1));
         let mut tau = JointVector::zeros();
         tau[0] = 100.0;
-        s.write(&tau, 1e-3).unwrap();
-        let m = s.read().unwrap();
+        s.write(0, 1e-3, &tau).unwrap();
+        let m = s.read(0).unwrap();
         assert!(m.saturated);
         assert_eq!(m.tau_applied[0], 20.0);
     }
@@ -409,10 +379,11 @@ link = {{ mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0
     #[test]
     fn inactive_arm_refuses_torque_and_stays_put() {
         let robot = pendulum(-9.81);
-        let mut s = SimArm::new(&robot, &sim_cfg(Integrator::Rk4, 1), &JointVector::zeros());
-        s.configure().unwrap();
-        assert!(s.write(&JointVector::zeros(), 1e-3).is_err());
-        assert_eq!(s.read().unwrap().q[0], 0.0);
+        let s = SimArm::new(&robot, &sim_cfg(Integrator::Rk4, 1), &JointVector::zeros());
+        let mut l = crate::lifecycle::Lifecycle::new(s);
+        l.configure().unwrap();
+        assert!(!l.write(0, 1e-3, &JointVector::zeros()));
+        assert_eq!(l.read(0).unwrap().q[0], 0.0);
     }
 
     #[test]
@@ -423,9 +394,9 @@ link = {{ mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0
         let mut a = active(&robot, &c);
         let mut b = active(&robot, &c);
         for _ in 0..10 {
-            assert_eq!(a.read().unwrap(), b.read().unwrap());
+            assert_eq!(a.read(0).unwrap(), b.read(0).unwrap());
         }
-        assert_ne!(a.read().unwrap().q[0], 0.0);
+        assert_ne!(a.read(0).unwrap().q[0], 0.0);
     }
 
     #[test]
@@ -436,7 +407,7 @@ link = {{ mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0
         let mut s = active(&robot, &c);
         let mut tau = JointVector::zeros();
         tau[0] = 1.0;
-        s.write(&tau, 1e-3).unwrap();
+        s.write(0, 1e-3, &tau).unwrap();
         let (_, qd) = s.true_state();
         assert!((qd[0] - 2e-3).abs() < 1e-12);
     }

@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use microrobot_actuator::{ActuatorCore, Mode, SimArm, initial_q};
-use microrobot_messages::{Header, LifecycleState, TorqueCommand, state_flags};
+use microrobot_messages::{Header, LifecycleState, TorqueCommand, state_flags, torque_flags};
 use microrobot_model::Robot;
 use microrobot_runtime::config::PipelineConfig;
 
@@ -105,4 +105,101 @@ fn the_arm_holds_still_under_its_own_law_in_the_safe_state() {
     assert!(drift < 2e-2, "drift {drift}");
     assert!(qd.iter().all(|v| v.abs() < 1e-2));
     let _ = Mode::Safe;
+}
+
+/// A command answering state `state_seq`, stamped `stamp_ns`.
+fn answering(seq: u64, stamp_ns: u64, state_seq: u64) -> TorqueCommand {
+    TorqueCommand {
+        state_seq,
+        ..torque(seq, stamp_ns)
+    }
+}
+
+#[test]
+fn after_a_stall_the_arm_holds_until_a_command_answers_a_state_from_after_it() {
+    let (mut c, _) = core();
+    let t0 = 1000 * MS;
+    let mut seq = 0;
+    let mut last_state = 0;
+    for k in 0..10 {
+        let now = t0 + k * MS;
+        seq += 1;
+        assert_eq!(c.on_wake(now), None, "no stall while stepping every period");
+        c.accept_torque(&answering(seq, now, last_state), 1, now)
+            .unwrap();
+        c.check_watchdog(now);
+        last_state = c.step(now).header.seq;
+    }
+    // Frozen for 100 ms (between stale_ms = 50 and fault_ms = 200).
+    let wake = t0 + 110 * MS;
+    assert_eq!(c.on_wake(wake), Some(101 * MS));
+    assert_eq!(c.counters.stalls, 1);
+    // Queued during the stall, stamped fresh, but answering the state before it (or
+    // computed without the feedback the dynamics wanted): not followed.
+    seq += 1;
+    assert!(
+        c.accept_torque(&answering(seq, wake, last_state), 1, wake)
+            .is_err()
+    );
+    seq += 1;
+    let mut no_feedback = answering(seq, wake, u64::MAX);
+    no_feedback.flags = torque_flags::STATE_STALE;
+    assert!(c.accept_torque(&no_feedback, 1, wake).is_err());
+    c.check_watchdog(wake);
+    let s = c.step(wake);
+    assert_ne!(s.flags & state_flags::STALLED, 0);
+    assert_ne!(s.flags & state_flags::COMMAND_STALE, 0, "holding");
+    assert!(!c.safe_state_latched());
+    // A command answering the first state after the stall: followed again.
+    let now = wake + MS;
+    seq += 1;
+    c.accept_torque(&answering(seq, now, s.header.seq), 1, now)
+        .unwrap();
+    c.check_watchdog(now);
+    let s = c.step(now);
+    assert_eq!(
+        s.flags & (state_flags::STALLED | state_flags::COMMAND_STALE),
+        0
+    );
+    assert_eq!(c.counters.stalls, 1);
+}
+
+#[test]
+fn a_stall_longer_than_fault_ms_latches_the_safe_state_before_queued_commands_count() {
+    let (mut c, _) = core();
+    let t0 = 1000 * MS;
+    c.accept_torque(&answering(1, t0, 0), 1, t0).unwrap();
+    c.check_watchdog(t0);
+    let s = c.step(t0);
+    let wake = t0 + 300 * MS;
+    assert!(c.on_wake(wake).is_some());
+    assert!(c.safe_state_latched(), "300 ms without commands");
+    // The command queued last during the stall is fresh by its stamp, but it answers
+    // the state before the stall: it neither feeds the watchdog nor allows a reset.
+    assert!(
+        c.accept_torque(&answering(2, wake, s.header.seq), 1, wake)
+            .is_err()
+    );
+    assert!(!c.reset(wake));
+    assert!(c.safe_state_latched());
+    // A step never applies a command older than stale_ms, whatever the caller did.
+    let s = c.step(wake);
+    assert_ne!(s.flags & state_flags::SAFE_STATE, 0);
+    assert_ne!(s.flags & state_flags::STALLED, 0);
+}
+
+#[test]
+fn lockstep_has_no_stalls() {
+    let cfg = PipelineConfig {
+        robot: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml"),
+        lockstep: true,
+        ..Default::default()
+    };
+    let robot = Robot::from_file(&cfg.robot).unwrap();
+    let sim = SimArm::new(&robot, &cfg.actuator.sim, &initial_q(&robot, &cfg));
+    let mut c = ActuatorCore::new(sim, &robot, &cfg).unwrap();
+    c.accept_torque(&torque(1, MS), 1, MS).unwrap();
+    c.step(MS);
+    assert_eq!(c.on_wake(10_000 * MS), None);
+    assert!(!c.stalled());
 }

@@ -82,6 +82,17 @@ pub fn enter_cycle(cfg: &PipelineConfig) {
 /// mlockall; each falling back with one warning), leaves CPU affinity and SCHED_FIFO to
 /// [`enter_cycle`], and runs `service`. Returns the process exit code ([`exit_code`]).
 pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -> ExitCode {
+    service_main_with(role, config_path, |_| Ok(()), service)
+}
+
+/// [`service_main`] with a closure as the service, and `adjust` applied to the loaded
+/// config first (command-line overrides; an `Err` is a config error, exit code 2).
+pub fn service_main_with(
+    role: ServiceRole,
+    config_path: &Path,
+    adjust: impl FnOnce(&mut PipelineConfig) -> Result<(), String>,
+    service: impl FnOnce(&PipelineConfig, &Shutdown) -> anyhow::Result<()>,
+) -> ExitCode {
     init_tracing();
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let shutdown = match Shutdown::new() {
@@ -104,7 +115,13 @@ pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -
     unsafe { libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM, 0, 0, 0) };
 
     let cfg = match PipelineConfig::load(config_path) {
-        Ok(c) => c,
+        Ok(mut c) => match adjust(&mut c) {
+            Ok(()) => c,
+            Err(e) => {
+                tracing::error!("{}: bad config: {e}", role.name());
+                return ExitCode::from(exit_code::BAD_CONFIG);
+            }
+        },
         Err(e) => {
             tracing::error!("{}: bad config: {e}", role.name());
             return ExitCode::from(exit_code::BAD_CONFIG);
