@@ -41,12 +41,15 @@ fn moving(s: &JointState, dof: usize) -> bool {
 fn a_frozen_actuator_wakes_holding_without_a_lurch_and_flags_the_stall() {
     let dir = tempfile::tempdir().expect("tempdir");
     let inst = instance("stall");
+    // What is under test is the actuator's own wake-up after the freeze; the supervisor's
+    // hung-service detection (which would end this run at 500 ms) is tested in verdicts.rs.
     let cfg = write_config(
         dir.path(),
         &inst,
         "",
         &format!(
-            "[watchdog]\nstale_ms = {STALE_MS}.0\nfault_ms = {FAULT_MS}.0\nramp_ms = 20.0\nsafe_state = \"hold\"\nauto_resume = false"
+            "[watchdog]\nstale_ms = {STALE_MS}.0\nfault_ms = {FAULT_MS}.0\nramp_ms = 20.0\nsafe_state = \"hold\"\nauto_resume = false\n\n\
+             [supervisor]\nhung_ms = 60000.0"
         ),
     );
     let summary_path = dir.path().join("summary.json");
