@@ -136,3 +136,86 @@ fn send_checks_targets_against_the_robot_the_instance_runs() {
     let out = proc.finish(60.0);
     assert_eq!(out.code(), Some(0), "{}", out.stderr);
 }
+
+/// `send --wait` returns once the arm holds again, with the motion's duration, and fails
+/// (exit 7) naming how when the motion ends any other way.
+#[test]
+fn send_wait_reports_the_motion_done_or_how_it_ended() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("send-wait");
+    let cfg = write_config(dir.path(), &inst, "", "");
+    let proc = start_holding(&inst, &cfg, 90, None);
+    let send = |args: &[&str]| {
+        let mut all = vec!["send", "--instance", inst.as_str()];
+        all.extend_from_slice(args);
+        run(&all, 60.0)
+    };
+
+    let done = send(&["move", "--wait", "--deg", "--joints", "10,10,10,10,10,10"]);
+    assert_eq!(done.code(), Some(0), "{}{}", done.stdout, done.stderr);
+    let secs: f64 = done
+        .stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("done: holding after "))
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no duration in {:?}", done.stdout));
+    // A 10° time-optimal move of the seed arm's slowest joint takes about a second; the
+    // duration is the planner's logical time, so it cannot be zero or minutes.
+    assert!(secs > 0.2 && secs < 10.0, "{secs} s");
+    // At rest already: a stop is done at once.
+    let stop = send(&["stop", "--wait"]);
+    assert_eq!(stop.code(), Some(0), "{}{}", stop.stdout, stop.stderr);
+    assert!(
+        stop.stdout.contains("done: holding after"),
+        "{}",
+        stop.stdout
+    );
+
+    // An e-stop while a slow move is under way ends the waited-for motion.
+    let inst2 = inst.clone();
+    let estop = std::thread::spawn(move || {
+        std::thread::sleep(std::time::Duration::from_millis(700));
+        run(&["send", "--instance", &inst2, "estop"], 60.0)
+    });
+    let cut = send(&[
+        "move",
+        "--wait",
+        "--deg",
+        "--joints",
+        "-40,-40,80,-40,-40,-40",
+        "--limit-scale",
+        "0.3",
+    ]);
+    let estop = estop.join().expect("estop thread");
+    assert_eq!(estop.code(), Some(0), "{}", estop.stderr);
+    assert_eq!(
+        cut.code(),
+        Some(microrobot_runtime::exit_code::JOB_FAILED as i32),
+        "{}{}",
+        cut.stdout,
+        cut.stderr
+    );
+    assert!(
+        cut.stderr.contains("the motion did not finish:"),
+        "{}",
+        cut.stderr
+    );
+    assert!(
+        cut.stderr.contains("an e-stop is braking the arm"),
+        "{}",
+        cut.stderr
+    );
+    // --wait is refused where nothing ends in a hold.
+    let bad = send(&["estop", "--wait"]);
+    assert_ne!(bad.code(), Some(0));
+    assert!(
+        bad.stderr.contains("--wait applies to `move` and `stop`"),
+        "{}",
+        bad.stderr
+    );
+
+    proc.signal(libc::SIGINT);
+    let out = proc.finish(60.0);
+    assert_ne!(out.code(), None, "the run died of a signal: {}", out.stderr);
+}

@@ -99,3 +99,70 @@ fn a_short_soak_with_a_kill_of_each_service_recovers_without_jumps_or_losses() {
     assert_eq!(r2.code(), Some(0), "{}", r2.stderr);
     assert_eq!(std::fs::read_to_string(&rendered).expect("rendered"), md);
 }
+
+/// Stalls (SIGSTOP) of each service longer than `supervisor.hung_ms`: the supervisor
+/// finds each hung, kills and restarts it, and the soak reports the hung verdict's time
+/// beside the stream-level detection, without jumps or losses outside the fault windows.
+#[test]
+fn a_soak_with_stalls_catches_each_hung_service_and_recovers() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("soak-stall");
+    let cfg = write_config(dir.path(), &inst, "", "");
+    let out = dir.path().join("soak");
+    let done = run(
+        &[
+            "soak",
+            "--config",
+            cfg.to_str().expect("utf-8"),
+            "--instance",
+            &inst,
+            "--duration",
+            "36s",
+            "--stall-every",
+            "6",
+            "--stall-for",
+            "2s",
+            "--quiet",
+            "--out",
+            out.to_str().expect("utf-8"),
+        ],
+        240.0,
+    );
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap_or_else(|e| {
+        panic!(
+            "no report.json ({e}); exit {:?}\nstdout:\n{}\nstderr:\n{}",
+            done.code(),
+            done.stdout,
+            done.stderr
+        )
+    });
+    let r: serde_json::Value = serde_json::from_str(&text).expect("report is JSON");
+    let v = &r["verdict"];
+    let ctx = || {
+        format!(
+            "verdict {v}\nfaults {}\nstderr:\n{}",
+            r["faults"], done.stderr
+        )
+    };
+    assert_eq!(done.code(), Some(0), "{}", ctx());
+    assert_eq!(v["pass"], true, "{}", ctx());
+    assert_eq!(v["jumps"], 0, "{}", ctx());
+    assert_eq!(v["lost_outside_kill_windows"], 0, "{}", ctx());
+    assert_eq!(v["latches_without_fault"], 0, "{}", ctx());
+    let faults = r["faults"].as_array().expect("faults");
+    let roles: Vec<&str> = faults.iter().filter_map(|f| f["role"].as_str()).collect();
+    assert_eq!(roles, ["planner", "dynamics", "actuator"], "{}", ctx());
+    for f in faults {
+        assert_eq!(f["kind"], "stall", "{}", ctx());
+        assert_eq!(f["recovered"], true, "{}", ctx());
+        // Caught as hung: the supervisor's verdict came after hung_ms of silence and
+        // before the stall would have ended on its own.
+        let hung = f["hung_detect_ms"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{}", ctx()));
+        assert!(hung > 0.0 && hung < 2000.0, "{hung} ms; {}", ctx());
+    }
+    assert_eq!(r["hung_detect_ms"]["count"], 3, "{}", ctx());
+    let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
+    assert!(md.contains("| stall planner (pid "), "{md}");
+}

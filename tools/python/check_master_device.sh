@@ -14,14 +14,15 @@
 #     and TELEOP_CLUTCH_OPEN during the released window; no sample refused;
 #   * every process (pipeline, publisher, report) exited 0 and the summary says ok.
 # Usage: bash tools/python/check_master_device.sh   (from anywhere; binary from
-# $MICROROBOT_BIN, default target/debug/microrobot, then target/release/microrobot)
+# $MICROROBOT_BIN, default target/release/microrobot, then target/debug/microrobot)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 repo="$(pwd)"
 
 bin="${MICROROBOT_BIN:-}"
 if [ -z "$bin" ]; then
-    for b in target/debug/microrobot target/release/microrobot; do
+    # A real-time pipeline is meant to run optimised: the release binary first.
+    for b in target/release/microrobot target/debug/microrobot; do
         [ -x "$b" ] && { bin="$b"; break; }
     done
 fi

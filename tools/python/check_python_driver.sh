@@ -16,7 +16,7 @@
 # update_connections) leaves the lockstep planner without a first measured state.
 # Then tools/python/check_layout.py compares the ctypes structs with the Rust payloads.
 # Usage: bash tools/python/check_python_driver.sh   (from anywhere; binary from
-# $MICROROBOT_BIN, default target/debug/microrobot, then target/release/microrobot;
+# $MICROROBOT_BIN, default target/release/microrobot, then target/debug/microrobot;
 # $DRIVER replaces tools/python/example_driver.py, e.g. to see a broken driver fail)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -24,7 +24,8 @@ repo="$(pwd)"
 
 bin="${MICROROBOT_BIN:-}"
 if [ -z "$bin" ]; then
-    for b in target/debug/microrobot target/release/microrobot; do
+    # A real-time pipeline is meant to run optimised: the release binary first.
+    for b in target/release/microrobot target/debug/microrobot; do
         [ -x "$b" ] && { bin="$b"; break; }
     done
 fi

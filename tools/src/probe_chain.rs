@@ -44,8 +44,9 @@ pub struct ProbeChainArgs {
     /// How long the source ticks (e.g. 60s, 10m).
     #[arg(long, default_value = "60s", value_parser = crate::duration::parse)]
     pub duration: f64,
-    /// Also write the result as JSON to this file.
-    #[arg(long)]
+    /// Also write the result as JSON to this file (as `run --summary-json`; `--json`
+    /// is an alias).
+    #[arg(long = "summary-json", visible_alias = "json", value_name = "FILE")]
     pub json: Option<PathBuf>,
     /// Internal: run one link of the chain (the parent starts these).
     #[arg(long, value_enum, hide = true)]

@@ -155,6 +155,9 @@ pub trait Hooks {
         _resume: Option<&microrobot_messages::JointState>,
     ) {
     }
+    /// The supervisor found `role`'s process `pid` hung (no status for
+    /// `supervisor.hung_ms`) and is killing it; the death then applies the failure policy.
+    fn hung(&mut self, _role: ServiceRole, _pid: u32) {}
     /// Appended to the progress line.
     fn progress(&self) -> String {
         String::new()
@@ -257,6 +260,28 @@ impl Control<'_> {
         }
         s.signal(libc::SIGKILL);
         Some(s.pid())
+    }
+
+    /// Stops `role`'s current process (SIGSTOP: alive, but neither running nor
+    /// reporting, as a hung service); its pid.
+    pub fn stall(&mut self, role: ServiceRole) -> Option<u32> {
+        let s = self.pipe.service(role)?;
+        if s.poll_exit().is_some() {
+            return None;
+        }
+        s.signal(libc::SIGSTOP);
+        Some(s.pid())
+    }
+
+    /// Continues a process [`Control::stall`] stopped, if it is still `role`'s process
+    /// (the supervisor may have killed it as hung and started another).
+    pub fn resume(&mut self, role: ServiceRole, pid: u32) {
+        if let Some(s) = self.pipe.service(role)
+            && s.pid() == pid
+            && s.poll_exit().is_none()
+        {
+            s.signal(libc::SIGCONT);
+        }
     }
 
     /// Whether `role` was restarted and has not reported ready yet (or is dead).
@@ -903,6 +928,7 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
                 && s.poll_exit().is_none()
             {
                 let silent_ms = seen.at.elapsed().as_secs_f64() * 1e3;
+                hooks.hung(role, s.pid());
                 progress.note(&format!(
                     "{} (pid {}) hung: no status for {silent_ms:.0} ms (supervisor.hung_ms = {}); killing it",
                     role.name(),

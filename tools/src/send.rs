@@ -34,6 +34,11 @@ pub struct SendArgs {
     /// How long to wait for the planner (connection and verdict).
     #[arg(long, global = true, default_value_t = 10.0, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub timeout: f64,
+    /// `move` and `stop`: return once the arm is holding again, with the motion's duration;
+    /// an error (exit 7) if the motion ends any other way (another command took over, an
+    /// e-stop, a stale measured state, the actuator's safe state).
+    #[arg(long, global = true)]
+    pub wait: bool,
     #[command(subcommand)]
     pub command: SendCommand,
 }
@@ -263,6 +268,10 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
     } else {
         args.config.clone()
     };
+    ensure!(
+        !args.wait || matches!(args.command, SendCommand::Move(_) | SendCommand::Stop),
+        "--wait applies to `move` and `stop` (the commands that end in a hold)"
+    );
     let robot = robot_of(&config)
         .with_context(|| format!("cannot check the target against {}", config.display()))?;
     let mut cmd = build_command(&args, robot.as_ref())?;
@@ -348,6 +357,18 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
                         "accepted by the planner of `{instance}` (command seq {})",
                         cmd.seq
                     );
+                    if args.wait {
+                        let newest = st.commands_taken().checked_sub(1).map(|n| {
+                            st.command_verdicts
+                                [(n % microrobot_messages::COMMAND_VERDICTS as u64) as usize]
+                        });
+                        let id = [me as u64, (me >> 64) as u64];
+                        ensure!(
+                            newest.is_some_and(|v| v.seq == cmd.seq && v.publisher == id),
+                            "the motion did not finish: another command reached the planner right after it (its log names it)"
+                        );
+                        return wait_for_hold(&mut monitor, instance, &st);
+                    }
                     return Ok(());
                 }
                 VerdictLookup::Refused(why) => {
@@ -391,6 +412,102 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
             );
         }
         std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// How long the planner may stay silent while `--wait` waits: ten status periods of the
+/// default config, far beyond a healthy planner's gap and below the supervisor's patience.
+const WAIT_SILENCE: Duration = Duration::from_secs(2);
+
+/// Where a waited-for motion stands in one planner status.
+#[derive(Debug, PartialEq)]
+enum WaitStep {
+    /// Still moving or braking as commanded.
+    Pending,
+    /// Holding again after this many seconds of the planner's logical time.
+    Done(f64),
+    /// Ended any other way, and how.
+    Failed(String),
+}
+
+/// Judges one planner status `st` against the status `accepted` that carried the
+/// command's acceptance (pure, so each case is tested below).
+fn wait_step(
+    accepted: &microrobot_messages::ServiceStatus,
+    st: &microrobot_messages::ServiceStatus,
+) -> WaitStep {
+    use microrobot_messages::Activity;
+    if st.pid != accepted.pid {
+        return WaitStep::Failed("the planner restarted".into());
+    }
+    let now = Activity::from_wire(st.activity);
+    match now {
+        Some(Activity::EStop) => return WaitStep::Failed("an e-stop is braking the arm".into()),
+        Some(Activity::SafeHold) => {
+            return WaitStep::Failed("the actuator latched its safe state".into());
+        }
+        _ => {}
+    }
+    if st.commands_taken() > accepted.commands_taken() {
+        return WaitStep::Failed("another command reached the planner (its log names it)".into());
+    }
+    let commanded = Activity::from_wire(accepted.activity);
+    match now {
+        Some(Activity::Hold) => {
+            WaitStep::Done((st.motion_time_s - accepted.motion_time_s).max(0.0))
+        }
+        now @ Some(Activity::Move | Activity::Stopping) if now == commanded => WaitStep::Pending,
+        Some(Activity::Stopping) => WaitStep::Failed(
+            "the planner is braking to rest (a stale measured state; see its log)".into(),
+        ),
+        other => WaitStep::Failed(format!("the planner's activity is now {other:?}")),
+    }
+}
+
+/// `--wait`: follows the planner's statuses from the one that accepted the command until
+/// the arm holds again (prints the motion's duration) or the motion ends otherwise (an
+/// error naming how, exit 7).
+fn wait_for_hold(
+    monitor: &mut StatusMonitor,
+    instance: &str,
+    accepted: &microrobot_messages::ServiceStatus,
+) -> anyhow::Result<()> {
+    let failed = |why: String| {
+        crate::exit::with_code(microrobot_runtime::exit_code::JOB_FAILED)(anyhow::anyhow!(
+            "the motion did not finish: {why}"
+        ))
+    };
+    let mut last_status = Instant::now();
+    let mut pending = vec![*accepted];
+    loop {
+        for st in pending.drain(..) {
+            match wait_step(accepted, &st) {
+                WaitStep::Pending => {}
+                WaitStep::Done(s) => {
+                    println!("done: holding after {s:.3} s of motion");
+                    return Ok(());
+                }
+                WaitStep::Failed(why) => return Err(failed(why)),
+            }
+        }
+        while pending.is_empty() {
+            pending.extend(
+                monitor
+                    .poll_all()?
+                    .into_iter()
+                    .filter(|s| s.role == ServiceRole::Planner as u32),
+            );
+            if !pending.is_empty() {
+                last_status = Instant::now();
+            } else if last_status.elapsed() > WAIT_SILENCE {
+                return Err(failed(format!(
+                    "the planner of `{instance}` stopped reporting for {:.1} s",
+                    WAIT_SILENCE.as_secs_f64()
+                )));
+            } else {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
     }
 }
 
@@ -447,4 +564,59 @@ fn refusal_detail(
         u(st.refusal_min),
         u(st.refusal_max)
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use microrobot_messages::{Activity, ServiceStatus};
+
+    fn status(activity: Activity, accepted: u64, motion_time_s: f64) -> ServiceStatus {
+        ServiceStatus {
+            pid: 7,
+            activity: activity as u32,
+            commands_accepted: accepted,
+            motion_time_s,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_move_is_done_when_the_planner_holds_again() {
+        let accepted = status(Activity::Move, 3, 10.0);
+        assert_eq!(
+            wait_step(&accepted, &status(Activity::Move, 3, 11.0)),
+            WaitStep::Pending
+        );
+        assert_eq!(
+            wait_step(&accepted, &status(Activity::Hold, 3, 12.5)),
+            WaitStep::Done(2.5)
+        );
+        let stop = status(Activity::Stopping, 4, 1.0);
+        assert_eq!(
+            wait_step(&stop, &status(Activity::Stopping, 4, 1.1)),
+            WaitStep::Pending
+        );
+    }
+
+    #[test]
+    fn a_move_that_ends_any_other_way_fails_naming_how() {
+        let accepted = status(Activity::Move, 3, 10.0);
+        let failed = |st: ServiceStatus| match wait_step(&accepted, &st) {
+            WaitStep::Failed(why) => why,
+            other => panic!("{other:?}"),
+        };
+        assert!(failed(status(Activity::Stopping, 3, 11.0)).contains("stale measured state"));
+        assert!(failed(status(Activity::EStop, 3, 11.0)).contains("e-stop"));
+        assert!(failed(status(Activity::SafeHold, 3, 11.0)).contains("safe state"));
+        assert!(failed(status(Activity::Hold, 4, 11.0)).contains("another command"));
+        assert!(
+            failed(ServiceStatus {
+                pid: 8,
+                ..status(Activity::Hold, 3, 11.0)
+            })
+            .contains("restarted")
+        );
+        assert!(failed(status(Activity::Teleop, 3, 11.0)).contains("Teleop"));
+    }
 }

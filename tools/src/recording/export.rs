@@ -1,4 +1,4 @@
-//! `microrobot export FILE.mcap --csv DIR`: one CSV per recorded topic.
+//! `microrobot export FILE.mcap --out DIR`: one CSV per recorded topic.
 //!
 //! Columns: `log_time_ns`, then the message's fields flattened (`header.seq`, ...,
 //! `q_0`..`q_{dof-1}`); floats as recorded (shortest round-trip form). Malformed
@@ -19,8 +19,8 @@ pub struct ExportArgs {
     /// Recording made by `microrobot record`.
     #[arg(value_name = "FILE.mcap")]
     pub file: PathBuf,
-    /// Directory for `<topic>.csv` (created if missing).
-    #[arg(long, value_name = "DIR")]
+    /// Directory for `<topic>.csv` (created if missing); `--csv` is an alias.
+    #[arg(long = "out", visible_alias = "csv", value_name = "DIR")]
     pub csv: PathBuf,
 }
 

@@ -47,6 +47,14 @@ pub struct SoakArgs {
     /// supervisor restarts it.
     #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
     pub kill_every: Option<f64>,
+    /// Stop a service (SIGSTOP) every SECS seconds, in turn planner, dynamics, actuator,
+    /// and continue it (SIGCONT) after `--stall-for`; a stall of at least
+    /// `supervisor.hung_ms` must be caught as hung (killed and restarted).
+    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
+    pub stall_every: Option<f64>,
+    /// How long each stall lasts.
+    #[arg(long, default_value = "1s", value_name = "DURATION", value_parser = crate::duration::parse)]
+    pub stall_for: f64,
     /// Random valid moves (replanning mid-motion) and stops, besides the motion cycle.
     #[arg(long)]
     pub random_commands: bool,
@@ -159,6 +167,20 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
             "--kill-every {k}: must be at least 2 s (a restart and its recovery take time)"
         )));
     }
+    if let Some(k) = args.stall_every
+        && (!k.is_finite() || k < 2.0 || k <= args.stall_for + 1.0)
+    {
+        return Err(bad(anyhow::anyhow!(
+            "--stall-every {k}: must be at least 2 s and more than --stall-for + 1 s ({} s)",
+            args.stall_for + 1.0
+        )));
+    }
+    if !(args.stall_for.is_finite() && args.stall_for > 0.0 && args.stall_for <= 30.0) {
+        return Err(bad(anyhow::anyhow!(
+            "--stall-for {}: must be within (0, 30] s",
+            args.stall_for
+        )));
+    }
     if !(args.jump_tolerance.is_finite() && (0.0..=10.0).contains(&args.jump_tolerance)) {
         return Err(bad(anyhow::anyhow!(
             "--jump-tolerance {}: must be within [0, 10]",
@@ -235,6 +257,8 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
         rotation: 0,
         floor_epoch: Default::default(),
         next_kill_s: args.kill_every.unwrap_or(f64::INFINITY),
+        next_stall_s: args.stall_every.unwrap_or(f64::INFINITY),
+        stalled: None,
         pending_fault: false,
         last_command: None,
         last_reset: None,
@@ -318,6 +342,9 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
             t0_ns: hooks.t0_ns,
             end_ns,
             kills: hooks.kills.clone(),
+            stall_every_s: args.stall_every,
+            stall_ms: args.stall_every.map(|_| args.stall_for * 1e3),
+            hung_ms: cfg.supervisor.hung_ms,
             floor,
             commands: hooks.commands.clone(),
             exit_code: code,
@@ -378,6 +405,9 @@ struct Soak {
     kills: Vec<Kill>,
     rotation: usize,
     next_kill_s: f64,
+    next_stall_s: f64,
+    /// The stalled service (role, pid, when to continue it).
+    stalled: Option<(ServiceRole, u32, Instant)>,
     /// A kill whose recovery has not been seen yet (no further kill meanwhile).
     pending_fault: bool,
     last_command: Option<Instant>,
@@ -435,6 +465,16 @@ impl Hooks for Soak {
             ServiceRole::Dynamics,
             ServiceRole::Actuator,
         ];
+        // A stall ends on time, whatever else is going on.
+        if let Some((role, pid, until)) = self.stalled
+            && now >= until
+        {
+            ctl.resume(role, pid);
+            self.stalled = None;
+        }
+        if self.stalled.is_some() {
+            return;
+        }
         if roles.iter().any(|r| ctl.restarting(*r)) {
             return;
         }
@@ -462,6 +502,33 @@ impl Hooks for Soak {
             self.pending_fault = false;
         }
         // Fault injection, one at a time, in turn.
+        if t >= self.next_stall_s
+            && !self.pending_fault
+            && self.args.duration - t > NO_KILL_BEFORE_END_S
+        {
+            let role = roles[self.rotation % roles.len()];
+            self.rotation += 1;
+            self.next_stall_s += self.args.stall_every.unwrap_or(f64::INFINITY);
+            if let Some(pid) = ctl.stall(role) {
+                let stall = Duration::from_secs_f64(self.args.stall_for);
+                self.stalled = Some((role, pid, now + stall));
+                self.kills.push(Kill {
+                    role: role.name().to_string(),
+                    pid,
+                    stamp_ns: monotonic_ns(),
+                    kind: "stall".into(),
+                    stall_ms: Some(self.args.stall_for * 1e3),
+                    hung_at_ns: None,
+                });
+                self.pending_fault = true;
+                ctl.note(&format!(
+                    "soak: SIGSTOP {} (pid {pid}) for {:.0} ms at {t:.1} s",
+                    role.name(),
+                    self.args.stall_for * 1e3
+                ));
+            }
+            return;
+        }
         if t >= self.next_kill_s
             && !self.pending_fault
             && self.args.duration - t > NO_KILL_BEFORE_END_S
@@ -478,6 +545,9 @@ impl Hooks for Soak {
                     role: role.name().to_string(),
                     pid,
                     stamp_ns: monotonic_ns(),
+                    kind: "kill".into(),
+                    stall_ms: None,
+                    hung_at_ns: None,
                 });
                 self.pending_fault = true;
                 ctl.note(&format!(
@@ -524,6 +594,20 @@ impl Hooks for Soak {
         }
     }
 
+    fn hung(&mut self, role: ServiceRole, pid: u32) {
+        if let Some(k) = self
+            .kills
+            .iter_mut()
+            .rev()
+            .find(|k| k.kind == "stall" && k.pid == pid && k.role == role.name())
+        {
+            k.hung_at_ns.get_or_insert(monotonic_ns());
+        }
+        if self.stalled.is_some_and(|(_, p, _)| p == pid) {
+            self.stalled = None;
+        }
+    }
+
     fn progress(&self) -> String {
         let (jumps, latches) = self.observer.as_ref().map_or((0, 0), |o| {
             (
@@ -541,7 +625,7 @@ impl Hooks for Soak {
             )
         });
         format!(
-            " | soak: kills {}, jumps {jumps}, latches {latches}{eta}",
+            " | soak: faults {}, jumps {jumps}, latches {latches}{eta}",
             self.kills.len()
         )
     }

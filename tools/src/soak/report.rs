@@ -20,12 +20,26 @@ pub const WINDOW_MARGIN_NS: u64 = 1_000_000_000;
 /// A fault not recovered within this time counts as unrecovered.
 pub const RECOVER_TIMEOUT_NS: u64 = 60_000_000_000;
 
-/// One injected kill, as the soak did it.
+/// One injected fault, as the soak did it: a `kill -9`, or a stall (SIGSTOP, then
+/// SIGCONT after `stall_ms` unless the supervisor found the service hung and killed it).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Kill {
     pub role: String,
     pub pid: u32,
     pub stamp_ns: u64,
+    /// `kill` or `stall`.
+    #[serde(default = "kind_kill")]
+    pub kind: String,
+    /// A stall's length as injected (ms).
+    #[serde(default)]
+    pub stall_ms: Option<f64>,
+    /// When the supervisor declared the stalled service hung (and killed it).
+    #[serde(default)]
+    pub hung_at_ns: Option<u64>,
+}
+
+fn kind_kill() -> String {
+    "kill".into()
 }
 
 /// One injected fault and what the pipeline did about it.
@@ -33,6 +47,12 @@ pub struct Kill {
 pub struct FaultRecord {
     pub role: String,
     pub pid: u32,
+    /// `kill` or `stall`.
+    #[serde(default = "kind_kill")]
+    pub kind: String,
+    /// Stall → the supervisor declared the service hung (`supervisor.hung_ms`).
+    #[serde(default)]
+    pub hung_detect_ms: Option<f64>,
     /// Since the start of the soak.
     pub at_s: f64,
     /// Kill → first stale/fault flag on a stream.
@@ -140,6 +160,16 @@ pub struct Report {
     pub faults: Vec<FaultRecord>,
     pub detect_ms: Spread,
     pub recover_ms: Spread,
+    /// Stall → the supervisor's hung verdict, over the stalls it caught.
+    #[serde(default)]
+    pub hung_detect_ms: Spread,
+    #[serde(default)]
+    pub stall_every_s: Option<f64>,
+    #[serde(default)]
+    pub stall_ms: Option<f64>,
+    /// The supervisor's `hung_ms`: stalls at least this long must be caught as hung.
+    #[serde(default)]
+    pub hung_ms: Option<f64>,
     pub latches: usize,
     pub latches_with_fault: usize,
     pub latches_without_fault_at_s: Vec<f64>,
@@ -168,6 +198,9 @@ pub struct Facts {
     /// End of the run under test (the last supervision poll, before the stop).
     pub end_ns: u64,
     pub kills: Vec<Kill>,
+    pub stall_every_s: Option<f64>,
+    pub stall_ms: Option<f64>,
+    pub hung_ms: f64,
     pub floor: Option<Floor>,
     pub commands: BTreeMap<String, u64>,
     pub exit_code: u8,
@@ -234,10 +267,16 @@ pub fn analyse_faults(
             .collect();
         let detect = after.iter().find(|e| is_detection(e.1));
         // Recovered: the restarted process publishes, and from then on (at the first
-        // moment) everything is well again.
+        // moment) everything is well again. A stall the supervisor did not kill has no
+        // restart: the process itself carries on once it is continued.
         let restarted = new_publisher(&k.role)
             .and_then(|kind| after.iter().find(|e| e.1 == kind))
-            .map(|e| e.0);
+            .map(|e| e.0)
+            .or_else(|| {
+                (k.kind == "stall" && k.hung_at_ns.is_none())
+                    .then(|| detect.map(|d| d.0))
+                    .flatten()
+            });
         let recover = match (detect, restarted) {
             (Some(d), Some(r)) => {
                 let from = d.0.max(r);
@@ -259,6 +298,8 @@ pub fn analyse_faults(
         records.push(FaultRecord {
             role: k.role.clone(),
             pid: k.pid,
+            kind: k.kind.clone(),
+            hung_detect_ms: k.hung_at_ns.map(ms),
             at_s: k.stamp_ns.saturating_sub(t0_ns) as f64 * 1e-9,
             detect_ms: detect.map(|d| ms(d.0)),
             detected_by: detect.map(|d| format!("{:?}", d.1)),
@@ -422,6 +463,21 @@ impl Report {
                 v.unrecovered_faults
             ));
         }
+        let missed_hung = facts
+            .kills
+            .iter()
+            .filter(|k| {
+                k.kind == "stall"
+                    && k.stall_ms.is_some_and(|ms| ms >= facts.hung_ms)
+                    && k.hung_at_ns.is_none()
+            })
+            .count();
+        if missed_hung > 0 {
+            v.reasons.push(format!(
+                "{missed_hung} stall(s) of at least supervisor.hung_ms ({} ms) not caught as hung",
+                facts.hung_ms
+            ));
+        }
         if v.jumps > 0 {
             v.reasons.push(format!("{} jump(s)", v.jumps));
         }
@@ -477,6 +533,10 @@ impl Report {
                 .collect(),
             detect_ms: Spread::of(faults.iter().filter_map(|f| f.detect_ms).collect()),
             recover_ms: Spread::of(faults.iter().filter_map(|f| f.recover_ms).collect()),
+            hung_detect_ms: Spread::of(faults.iter().filter_map(|f| f.hung_detect_ms).collect()),
+            stall_every_s: facts.stall_every_s,
+            stall_ms: facts.stall_ms,
+            hung_ms: Some(facts.hung_ms),
             faults,
             latches: latch_times.len(),
             latches_with_fault: latch_times.len() - latches_without.len(),
@@ -516,12 +576,16 @@ impl Report {
         let _ = writeln!(s, "```\n{}\n```\n", self.command);
         let _ = writeln!(
             s,
-            "{:.0} s at {} Hz; kills every {}; random commands {}; CPU load threads {}; seed {}. \
+            "{:.0} s at {} Hz; kills every {}; stalls every {}; random commands {}; CPU load threads {}; seed {}. \
              Load average at start `{}`, at end `{}`.\n",
             self.duration_s,
             self.rate_hz,
             self.kill_every_s
                 .map_or("never".to_string(), |k| format!("{k} s")),
+            match (self.stall_every_s, self.stall_ms) {
+                (Some(e), Some(ms)) => format!("{e} s ({ms} ms each)"),
+                _ => "never".to_string(),
+            },
             if self.random_commands { "on" } else { "off" },
             self.cpu_load_threads,
             self.seed,
@@ -562,8 +626,17 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "| time to recover, ms (min / p50 / max) | {:.1} / {:.1} / {:.1} |\n",
+            "| time to recover, ms (min / p50 / max) | {:.1} / {:.1} / {:.1} |",
             self.recover_ms.min, self.recover_ms.p50, self.recover_ms.max
+        );
+        let _ = writeln!(
+            s,
+            "| stalls caught as hung by the supervisor, ms after the stop (count: min / p50 / max; hung_ms {}) | {}: {:.1} / {:.1} / {:.1} |\n",
+            self.hung_ms.map_or("-".to_string(), |h| format!("{h}")),
+            self.hung_detect_ms.count,
+            self.hung_detect_ms.min,
+            self.hung_detect_ms.p50,
+            self.hung_detect_ms.max
         );
         let _ = writeln!(s, "## Latency and lateness (µs)\n");
         let _ = writeln!(
@@ -630,26 +703,30 @@ impl Report {
         } else {
             let _ = writeln!(
                 s,
-                "| # | t (s) | killed | detect (ms) | seen first | recover (ms) | recovered |\n|---|---|---|---|---|---|---|"
+                "| # | t (s) | fault | detect (ms) | seen first | hung verdict (ms) | recover (ms) | recovered |\n|---|---|---|---|---|---|---|---|"
             );
             for (i, f) in self.faults.iter().enumerate() {
                 let o = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.1}"));
                 let _ = writeln!(
                     s,
-                    "| {} | {:.1} | {} (pid {}) | {} | {} | {} | {} |",
+                    "| {} | {:.1} | {} {} (pid {}) | {} | {} | {} | {} | {} |",
                     i + 1,
                     f.at_s,
+                    f.kind,
                     f.role,
                     f.pid,
                     o(f.detect_ms),
                     f.detected_by.as_deref().unwrap_or("-"),
+                    o(f.hung_detect_ms),
                     o(f.recover_ms),
                     if f.recovered { "yes" } else { "NO" }
                 );
             }
             let _ = writeln!(
                 s,
-                "\nDetect: the first stale/fault flag on a stream after the kill. Recover: the \
+                "\nDetect: the first stale/fault flag on a stream after the kill or stop. Hung \
+                 verdict: a stalled service's silence judged by the supervisor, which kills it \
+                 and restarts it. Recover: the \
                  actuator follows fresh torque commands again and the planner no longer mirrors \
                  the held arm (the soak sends the Reset a latched actuator needs).\n"
             );
@@ -749,6 +826,9 @@ mod tests {
             role: "dynamics".into(),
             pid: 7,
             stamp_ns: 1_000_000_000,
+            kind: kind_kill(),
+            stall_ms: None,
+            hung_at_ns: None,
         }
     }
 
@@ -805,6 +885,58 @@ mod tests {
         // Taking the stop into the run (the old end) reads it as an unrecovered fault.
         let (f, _) = analyse_faults(&kills, &edges, 0, 3_020_000_000);
         assert!(!f[0].recovered);
+    }
+
+    /// A short stall the supervisor did not kill recovers without a restart, once the
+    /// continued process has everything well again; a stall caught as hung recovers like
+    /// a kill, with its restart.
+    #[test]
+    fn a_stall_recovers_with_or_without_the_supervisors_kill() {
+        let edges = vec![
+            e(10, EdgeKind::StateHealthy),
+            e(1060, EdgeKind::TorqueStale),
+            e(1300, EdgeKind::TorqueFresh),
+        ];
+        let stall = Kill {
+            kind: "stall".into(),
+            stall_ms: Some(300.0),
+            ..dynamics_killed_at_1s()
+        };
+        let (f, _) = analyse_faults(std::slice::from_ref(&stall), &edges, 0, 10_000_000_000);
+        assert_eq!(f[0].kind, "stall");
+        assert!((f[0].detect_ms.unwrap() - 60.0).abs() < 1e-9, "{:?}", f[0]);
+        assert!(
+            (f[0].recover_ms.unwrap() - 300.0).abs() < 1e-9,
+            "{:?}",
+            f[0]
+        );
+        assert_eq!(f[0].hung_detect_ms, None);
+        // A kill with the same edges has no restart: not recovered.
+        let (f, _) = analyse_faults(&[dynamics_killed_at_1s()], &edges, 0, 10_000_000_000);
+        assert!(!f[0].recovered);
+        // Caught as hung at +520 ms and restarted: recovered at the restart's first torque.
+        let hung = Kill {
+            stall_ms: Some(2000.0),
+            hung_at_ns: Some(1_520_000_000),
+            ..stall
+        };
+        let edges = vec![
+            e(10, EdgeKind::StateHealthy),
+            e(1060, EdgeKind::TorqueStale),
+            e(1600, EdgeKind::NewTorquePublisher),
+            e(1610, EdgeKind::TorqueFresh),
+        ];
+        let (f, _) = analyse_faults(&[hung], &edges, 0, 10_000_000_000);
+        assert!(
+            (f[0].hung_detect_ms.unwrap() - 520.0).abs() < 1e-9,
+            "{:?}",
+            f[0]
+        );
+        assert!(
+            (f[0].recover_ms.unwrap() - 610.0).abs() < 1e-9,
+            "{:?}",
+            f[0]
+        );
     }
 
     #[test]
