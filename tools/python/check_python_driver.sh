@@ -145,6 +145,61 @@ if judge broken; then
     fail "a driver that never published an initial state passed: the check cannot tell a broken start"
 fi
 
+echo "== driver-check: the Python example driver, free-running and in lockstep"
+dcfg="$work/driver-check.toml"
+cat >"$dcfg" <<EOF2
+robot = "$repo/config/robots/seed-arm.toml"
+
+[realtime]
+cpu_affinity = []
+pm_qos = false
+mlockall = false
+EOF2
+for mode in "" "--lockstep"; do
+    "$bin" driver-check --config "$dcfg" $mode -- "$py" "$driver" >"$work/dc.out" 2>&1 \
+        || { cat "$work/dc.out" >&2; fail "driver-check $mode on $driver"; }
+    tail -n 1 "$work/dc.out"
+done
+
+echo "== driver-check: broken drivers fail on the right clause"
+# broken NAME CLAUSE PYTHON-PATCH [driver-check options]: a copy of the example driver with
+# one contract clause broken; driver-check must exit 7 and name that clause among the failures.
+broken() {
+    local name="$1" clause="$2" patch="$3"; shift 3
+    cat >"$work/broken_$name.py" <<EOF2
+import sys
+sys.path.insert(0, "$repo/tools/python")
+import example_driver, microrobot_driver
+from microrobot_driver import Driver
+$patch
+sys.exit(example_driver.main())
+EOF2
+    set +e
+    "$bin" driver-check --config "$dcfg" "$@" -- "$py" "$work/broken_$name.py" >"$work/dc_$name.out" 2>&1
+    local rc=$?
+    set -e
+    grep -qE "^driver-check: FAILED: (.*, )?$clause(,|$)" "$work/dc_$name.out" && [ "$rc" = 7 ] || {
+        cat "$work/dc_$name.out" >&2
+        fail "driver-check on a driver with '$name' broken: exit $rc, want 7 and a failed '$clause' clause"
+    }
+    echo "broken driver '$name': $(tail -n 1 "$work/dc_$name.out")"
+}
+# (free-running, a state every period reaches a late subscriber anyway: lockstep shows it)
+broken no-initial-state "initial state" '
+Driver.publish_initial_state = lambda self: self._read()
+Driver.waiting_for_first_torque = lambda self: None' --lockstep
+broken tick-not-copied "tick and stamp copied" '
+_orig = Driver.state_message
+def _no_tick(self, now_ns, final=False):
+    s = _orig(self, now_ns, final)
+    s.header.tick = 0
+    return s
+Driver.state_message = _no_tick'
+broken ignores-sigterm "SIGTERM" '
+Driver._on_signal = lambda self, signum, frame: None'
+broken status-latency-zero "status" '
+microrobot_driver.LatencyHistogram.record = lambda self, ns: None'
+
 echo "== layout: ctypes structs against the Rust payloads"
 "$py" tools/python/check_layout.py || fail "tools/python/check_layout.py"
 echo "check_python_driver: ok"

@@ -23,8 +23,8 @@ class DampedInertiaArm(Driver):
         super().__init__(cfg)
         self.J, self.b = inertia, damping
         self.hold_inertia = inertia          # gains of the driver's own hold law
-        self.q = list(cfg.initial_q)         # the start position of [actuator.sim]
-        self.qd = [0.0] * self.dof
+        self.q = list(cfg.initial_q)         # [actuator.sim]'s start, or the resume state
+        self.qd = list(cfg.initial_qd)
         self.tau = [0.0] * self.dof
 
     def read(self):

@@ -247,6 +247,28 @@ def take(subscriber, cls):
 
 # --- the pipeline config the supervisor hands the driver (MICROROBOT_CONFIG) ------------
 
+def parse_resume_state(text, dof):
+    """`q=..;qd=..;tau=..` (comma-separated SI values, `dof` each) as a dict of lists;
+    None when `text` is empty. Anything malformed is refused (SystemExit naming it):
+    a driver must never start from a state it cannot read."""
+    if not text:
+        return None
+    out = {}
+    for part in text.split(";"):
+        key, sep, values = part.partition("=")
+        try:
+            nums = [float(v) for v in values.split(",")] if sep else []
+        except ValueError:
+            nums = []
+        if key not in ("q", "qd", "tau") or len(nums) != dof or not all(map(math.isfinite, nums)):
+            raise SystemExit(f"driver: MICROROBOT_RESUME_STATE: bad part {part!r} "
+                             f"(want q=..;qd=..;tau=.. with {dof} finite values each)")
+        out[key] = nums
+    if set(out) != {"q", "qd", "tau"}:
+        raise SystemExit(f"driver: MICROROBOT_RESUME_STATE: {text!r} lacks one of q, qd, tau")
+    return out
+
+
 class DriverConfig:
     """What a driver needs from the resolved pipeline config and its robot file."""
 
@@ -287,6 +309,14 @@ class DriverConfig:
         kinds = [j.get("kind", "revolute") for j in self.joints] or ["revolute"] * self.dof
         self.initial_q = [(math.radians(deg[i]) if kinds[i] == "revolute" else deg[i] * 1e-3)
                           if i < len(deg) else 0.0 for i in range(self.dof)]
+        self.initial_qd = [0.0] * self.dof
+        # A restart after a crash: the supervisor hands over the dead driver's last state
+        # (MICROROBOT_RESUME_STATE, "q=..;qd=..;tau=..", SI). A simulated plant starts
+        # there, as the physical arm has not moved; a hardware driver reads its encoders.
+        self.resume = parse_resume_state(os.environ.get("MICROROBOT_RESUME_STATE"), self.dof)
+        if self.resume is not None:
+            self.initial_q = list(self.resume["q"])
+            self.initial_qd = list(self.resume["qd"])
 
     @property
     def period_ns(self):
@@ -575,6 +605,7 @@ class Driver:
         self.next_status_ns = now_ns + round(self.cfg.status_period_ms * 1e6)
 
     def publish_state(self, s):
+        self.answered_seq = s.torque_seq
         self.state_pub.send_copy(s)
         self.state_notifier.notify()
 
@@ -658,8 +689,15 @@ class Driver:
                     self.check_watchdog(now)
                     self.publish_state(self.step(monotonic_ns()))
             for cmd, _ in take(self.cmd_sub, MotionCommand):
-                if cmd.kind == CommandKind.RESET:
-                    self.reset(monotonic_ns())
+                if cmd.kind == CommandKind.RESET and self.reset(monotonic_ns()):
+                    # Lockstep: a torque taken while latched and not yet answered by a
+                    # timer step is answered now, or the loop (which ticks on states)
+                    # would wait for a state while this waits for a torque.
+                    if cfg.lockstep and self.latest is not None \
+                            and getattr(self, "answered_seq", None) != self.latest.header.seq:
+                        now = monotonic_ns()
+                        self.check_watchdog(now)
+                        self.publish_state(self.step(now))
             now = monotonic_ns()
             if now >= next_tick:
                 if self.latest is None:

@@ -2,6 +2,7 @@
 
 pub mod check;
 pub mod config_path;
+pub mod driver_check;
 pub mod duration;
 pub mod eval_model;
 pub mod eval_trajectory;

@@ -10,8 +10,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, replay};
 use microrobot_cli::{
-    check, eval_model, eval_trajectory, inspect, probe_chain, run, send, service, soak, study,
-    teleop_report, teleop_source, top,
+    check, driver_check, eval_model, eval_trajectory, inspect, probe_chain, run, send, service,
+    soak, study, teleop_report, teleop_source, top,
 };
 
 #[derive(Parser)]
@@ -32,6 +32,9 @@ enum Command {
     /// Check the pipeline config, robot and program together before anything moves, and
     /// print the resolved settings.
     Check(check::CheckArgs),
+    /// Run an actuator driver (any language) against a scripted pipeline and check the
+    /// driver contract clause by clause.
+    DriverCheck(driver_check::DriverCheckArgs),
     /// Run the pipeline for minutes to hours with injected faults and write a soak report.
     Soak(soak::SoakArgs),
     /// Measure the machine's floor for the pipeline's latency and CPU: three bare processes
@@ -147,6 +150,7 @@ fn main() -> ExitCode {
         Command::Run(args) => return run::main(args),
         Command::Check(args) => return check::main(args),
         Command::Soak(args) => return soak::main(args),
+        Command::DriverCheck(args) => return driver_check::main(args),
         Command::ProbeChain(args) => probe_chain::main(args),
         Command::Send(args) => send::main(args),
         Command::Top(args) => top::main(args),

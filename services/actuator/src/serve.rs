@@ -205,7 +205,12 @@ where
     // period after the planner's ticks (below). When the planner ticks on states, this
     // timer is the pipeline's master clock and is left where it is.
     let mut phased = cfg.planner_ticks_on_states();
+    // The torque the last published state answered, and the last torque accepted: in
+    // lockstep every torque is owed one state.
+    let answered = std::cell::Cell::new(u64::MAX);
+    let mut accepted = u64::MAX;
     let publish = |s: JointState| {
+        answered.set(s.torque_seq);
         let ok = state_pub.send_copy(s).is_ok();
         let _ = state_notifier.notify();
         ok
@@ -267,6 +272,7 @@ where
                 drop(sample);
                 let now = monotonic_ns();
                 if core.accept_torque(&msg, publisher, now).is_ok() {
+                    accepted = msg.header.seq;
                     e2e.record(now.saturating_sub(msg.header.source_stamp_ns));
                     if !cfg.lockstep && !phased {
                         // Free-running: put the plant steps half a period after the
@@ -302,6 +308,14 @@ where
                     && core.reset(monotonic_ns())
                 {
                     tracing::info!("actuator: reset, following torque commands again");
+                    // Lockstep: a torque taken while latched and not yet answered by a
+                    // timer step is answered now, or the loop (which ticks on states)
+                    // would wait for a state while this waits for a torque.
+                    if cfg.lockstep && accepted != u64::MAX && accepted != answered.get() {
+                        let now = monotonic_ns();
+                        core.check_watchdog(now);
+                        publish(core.step(now));
+                    }
                 }
             }
         }
