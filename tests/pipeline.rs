@@ -182,13 +182,14 @@ fn lockstep_runs_are_bit_identical() {
     );
 }
 
-/// The example driver binary (built by `cargo test --workspace`, or built here).
+/// The example driver binary, built here (a no-op when `cargo test --workspace` built it
+/// already; a stale binary from before a contract change would fail to open the bus).
 fn example_driver() -> PathBuf {
     let exe = PathBuf::from(bin())
         .parent()
         .expect("binary dir")
         .join("microrobot-example-driver");
-    if !exe.exists() {
+    {
         let status = std::process::Command::new(env!("CARGO"))
             .args(["build", "-p", "microrobot-example-driver"])
             .current_dir(repo())

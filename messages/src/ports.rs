@@ -52,10 +52,12 @@ impl ServiceKind {
 
 /// QoS shared by every publish-subscribe service of the contract.
 pub mod qos {
-    /// Samples a subscriber may queue. Large enough that a lockstep subscriber that is
-    /// woken late still finds every message (the queue overwrites the oldest when full,
-    /// which a subscriber then sees as a sequence gap).
-    pub const SUBSCRIBER_BUFFER: usize = 64;
+    /// Samples a subscriber may queue, sized in time: 64 ms of a 4 kHz stream (256 ms at
+    /// 1 kHz), so a service frozen by a host stall of tens of ms finds every message when
+    /// it wakes (a 20 ms stall at 4 kHz queues 80 setpoints and then a burst of 80
+    /// torques), and a lockstep subscriber woken late does too. A full queue overwrites
+    /// its oldest sample, which the subscriber sees as a sequence gap.
+    pub const SUBSCRIBER_BUFFER: usize = 256;
     /// Late joiners get the last sample (the planner starts from the measured state).
     pub const HISTORY: usize = 1;
     /// Publishers per service: one owner plus room for a restarted process whose dead

@@ -213,7 +213,7 @@ impl Recorder {
     }
 
     /// Like [`Recorder::start`], but polls without sleeping (lockstep runs outpace a
-    /// sleeping poller's queue of 64).
+    /// sleeping poller's queue of `SUBSCRIBER_BUFFER`).
     pub fn start_spinning(instance: &str) -> Self {
         Self::spawn(instance, true, true)
     }

@@ -14,6 +14,7 @@ Usage: python3 tools/python/check_layout.py [--json FILE]
 import argparse
 import ctypes
 import json
+import re
 import os
 import subprocess
 import sys
@@ -61,6 +62,29 @@ def compare(rust, classes):
     return errors
 
 
+def compare_qos():
+    """The QoS constants of messages/src/ports.rs against the Python clients' copies:
+    iceoryx2 lets the first creator's settings win, so a Python driver that creates a
+    service with other settings locks the Rust services out."""
+    repo = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
+    src = open(os.path.join(repo, "messages", "src", "ports.rs")).read()
+    rust = {k: int(v) for k, v in re.findall(r"pub const ([A-Z_]+): usize = (\d+);", src)}
+    want = {"subscriber_max_buffer_size": "SUBSCRIBER_BUFFER", "history_size": "HISTORY",
+            "max_publishers": "MAX_PUBLISHERS", "max_subscribers": "MAX_SUBSCRIBERS",
+            "max_nodes": "MAX_NODES"}
+    import master_device  # noqa: E402  (the README-only master device has its own copy)
+    errors = []
+    for where, qos in (("microrobot_driver.py", mr.QOS), ("master_device.py", master_device.QOS)):
+        for key, const in want.items():
+            if const not in rust:
+                errors.append(f"qos: {const} not found in messages/src/ports.rs")
+            elif qos.get(key) != rust[const]:
+                errors.append(f"qos: {key} is {qos.get(key)} in {where}, {rust[const]} in Rust ({const})")
+    if mr.SUBSCRIBER_BUFFER != rust.get("SUBSCRIBER_BUFFER"):
+        errors.append(f"qos: SUBSCRIBER_BUFFER is {mr.SUBSCRIBER_BUFFER} in microrobot_driver.py")
+    return errors
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", help="the Rust layout (default: run the messages crate's example)")
@@ -73,7 +97,7 @@ def main(argv=None):
                                "layout_json"], cwd=repo, check=True, capture_output=True,
                               text=True).stdout
     rust = json.loads(text)
-    errors = compare(rust, mr.PAYLOADS)
+    errors = compare(rust, mr.PAYLOADS) + compare_qos()
     for e in errors:
         print(f"check_layout: {e}", file=sys.stderr)
     if errors:

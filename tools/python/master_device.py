@@ -60,7 +60,7 @@ assert ctypes.sizeof(MasterPose) == 96 and ctypes.alignment(MasterPose) == 8
 assert all(getattr(MasterPose, f).offset == o for f, o in _OFFSETS.items())
 
 # The QoS every process of the pipeline requests (messages/README.md, "QoS").
-QOS = {"subscriber_max_buffer_size": 64, "subscriber_max_borrowed_samples": 2,
+QOS = {"subscriber_max_buffer_size": 256, "subscriber_max_borrowed_samples": 2,
        "history_size": 1, "max_publishers": 8, "max_subscribers": 16, "max_nodes": 32}
 EVENT_PORTS = 16
 EVENT_MAX_NODES = 32

@@ -177,9 +177,9 @@ class TorqueFlags:
 
 # --- services and QoS (messages/src/ports.rs) ------------------------------------------
 
-QOS = {"subscriber_max_buffer_size": 64, "subscriber_max_borrowed_samples": 2,
+QOS = {"subscriber_max_buffer_size": 256, "subscriber_max_borrowed_samples": 2,
        "history_size": 1, "max_publishers": 8, "max_subscribers": 16, "max_nodes": 32}
-SUBSCRIBER_BUFFER = 64
+SUBSCRIBER_BUFFER = 256
 EVENT_PORTS = 16
 EVENT_MAX_NODES = 32
 STREAMS = {"setpoint": JointSetpoint, "torque": TorqueCommand, "state": JointState,
