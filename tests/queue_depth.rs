@@ -49,7 +49,11 @@ fn a_20_ms_stall_at_4_khz_loses_nothing_and_moves_nothing_abruptly() {
         pid(ServiceRole::Actuator),
     );
 
-    let mv = send(&inst, &cfg, &["move", "--deg", "--joints", "30,30,60,30,30,30"]);
+    let mv = send(
+        &inst,
+        &cfg,
+        &["move", "--deg", "--joints", "30,30,60,30,30,30"],
+    );
     assert_eq!(mv.code(), Some(0), "move: {}", mv.stderr);
     std::thread::sleep(Duration::from_millis(600));
     freeze(&[dynamics], STALL_MS);
