@@ -12,7 +12,7 @@ use std::time::Duration;
 use common::continuity::{Limits, setpoint_jumps};
 use common::*;
 use microrobot_messages::{CommandKind, LifecycleState, ServiceRole, monotonic_ns, setpoint_flags};
-use microrobot_trajectory::{JointState as Start, JointVector, KinematicLimits, stop_trajectory};
+use microrobot_trajectory::{JointVector, KinematicLimits, MotionState as Start, stop_trajectory};
 
 const PERIOD_S: f64 = 1e-3;
 

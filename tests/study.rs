@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use microrobot_cli::study::{self, StudyArgs};
 use microrobot_model::{ModelData, Robot, rnea};
 use microrobot_trajectory::{
-    JointState, JointVector, KinematicLimits, MotionRequest, Profile, Trajectory, minimum_duration,
+    JointVector, KinematicLimits, MotionRequest, MotionState, Profile, Trajectory, minimum_duration,
 };
 use serde_json::Value;
 
@@ -93,8 +93,8 @@ fn table4_request(robot: &Robot, profile: Profile) -> MotionRequest {
     }
     MotionRequest {
         dof: 6,
-        start: JointState::at_rest(start),
-        target: JointState::at_rest(target),
+        start: MotionState::at_rest(start),
+        target: MotionState::at_rest(target),
         profile,
         limits: seed_limits(robot),
     }

@@ -16,7 +16,7 @@ use std::process::ExitCode;
 use microrobot_model::{JointKind, Robot};
 use microrobot_planner::program::ProgramRunner;
 use microrobot_runtime::{PipelineConfig, exit_code};
-use microrobot_trajectory::JointState;
+use microrobot_trajectory::MotionState;
 use microrobot_trajectory::program::Target;
 
 use crate::run::{RunArgs, resolve_config};
@@ -206,7 +206,7 @@ pub fn check_pipeline(cfg: &PipelineConfig) -> Findings {
         return f;
     }
     let limits = microrobot_planner::program_limits(&robot, cfg);
-    let state = JointState {
+    let state = MotionState {
         q: start,
         ..Default::default()
     };

@@ -12,7 +12,7 @@
 use std::io::{BufRead, Write};
 
 use microrobot_trajectory::{
-    JointState, JointVector, KinematicLimits, MAX_JOINTS, MotionRequest, Profile, Trajectory,
+    JointVector, KinematicLimits, MAX_JOINTS, MotionRequest, MotionState, Profile, Trajectory,
     TrajectoryError,
 };
 use serde_json::{Map, Value, json};
@@ -270,12 +270,12 @@ fn eval(map: &Map<String, Value>) -> Result<Value, String> {
     }
     let req = MotionRequest {
         dof,
-        start: JointState {
+        start: MotionState {
             q: q0,
             qd: opt_joint("v0")?,
             qdd: opt_joint("a0")?,
         },
-        target: JointState {
+        target: MotionState {
             q: q1,
             qd: opt_joint("v1")?,
             qdd: opt_joint("a1")?,

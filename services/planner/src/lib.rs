@@ -47,7 +47,7 @@ use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::{Refusal, SeqTracker, check_fresh, check_state};
 use microrobot_runtime::{BadConfig, PeriodicClock, Reactor, Shutdown, StatusPort, open_node};
 use microrobot_trajectory::{
-    Generator, JointState, JointVector, KinematicLimits, MotionRequest, Profile, Sample, Status,
+    Generator, JointVector, KinematicLimits, MotionRequest, MotionState, Profile, Sample, Status,
     Trajectory, TrajectoryError, stop_trajectory,
 };
 
@@ -770,7 +770,7 @@ impl PlannerCore {
         let req = MotionRequest {
             dof: self.dof,
             start: self.current.state(),
-            target: JointState::at_rest(target),
+            target: MotionState::at_rest(target),
             profile,
             limits,
         };

@@ -8,7 +8,7 @@ use std::path::Path;
 use microrobot_model::Robot;
 use microrobot_trajectory::model::ModelIk;
 use microrobot_trajectory::program::{Program, ProgramRunner as Runner};
-use microrobot_trajectory::{JointState, KinematicLimits, Sample, Status};
+use microrobot_trajectory::{KinematicLimits, MotionState, Sample, Status};
 
 /// A loaded program, then (after [`ProgramRunner::plan`]) its running plan.
 #[derive(Debug, Clone)]
@@ -53,7 +53,7 @@ impl ProgramRunner {
     pub fn plan(
         &mut self,
         robot: &Robot,
-        start: &JointState,
+        start: &MotionState,
         limits: &KinematicLimits,
     ) -> Result<(), String> {
         let segments = self

@@ -21,6 +21,10 @@ use std::process::ExitCode;
 
 pub use config::{ConfigError, PipelineConfig};
 pub use microrobot_messages::ServiceRole;
+
+// The bus carries the model's joint vectors: one capacity for both (the messages crate
+// stays free of the model, the model free of the bus).
+const _: () = assert!(microrobot_messages::MAX_JOINTS == microrobot_model::MAX_JOINTS);
 pub use node::{InstanceInUse, open_node, waitset};
 pub use reactor::{Reactor, Ready, Source};
 pub use shutdown::Shutdown;

@@ -41,7 +41,7 @@ pub use microrobot_model::{JointVector, MAX_JOINTS};
 
 /// Kinematic state of all joints (capacity 8, `dof` active).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct JointState {
+pub struct MotionState {
     /// Position (rad).
     pub q: JointVector,
     /// Velocity (rad/s).
@@ -50,7 +50,7 @@ pub struct JointState {
     pub qdd: JointVector,
 }
 
-impl JointState {
+impl MotionState {
     /// A state at rest at position `q`.
     pub fn at_rest(q: JointVector) -> Self {
         Self {
@@ -75,8 +75,8 @@ pub struct Sample {
 
 impl Sample {
     /// The kinematic state (q, qd, qdd) of this sample, e.g. to replan from it.
-    pub fn state(&self) -> JointState {
-        JointState {
+    pub fn state(&self) -> MotionState {
+        MotionState {
             q: self.q,
             qd: self.qd,
             qdd: self.qdd,
@@ -151,10 +151,10 @@ pub struct MotionRequest {
     /// Number of active joints, 1..=8.
     pub dof: usize,
     /// Start state (soft motion may start moving; LSPB starts at rest).
-    pub start: JointState,
+    pub start: MotionState,
     /// Target state: qd/qdd are used by cubic (qd) and quintic (qd, qdd); LSPB and
     /// soft motion end at rest.
-    pub target: JointState,
+    pub target: MotionState,
     /// Motion law.
     pub profile: Profile,
     /// Joint limits (soft motion honours them; fixed-duration profiles report against them).

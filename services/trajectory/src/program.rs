@@ -10,7 +10,7 @@
 use serde::Deserialize;
 
 use crate::{
-    Generator, JointState, JointVector, KinematicLimits, MAX_JOINTS, MotionRequest, Profile,
+    Generator, JointVector, KinematicLimits, MAX_JOINTS, MotionRequest, MotionState, Profile,
     Sample, Status, Trajectory, TrajectoryError,
 };
 
@@ -387,7 +387,7 @@ impl Program {
     /// before its end, and the next segment starts from that moving state.
     pub fn plan_all(
         &self,
-        start: &JointState,
+        start: &MotionState,
         limits: &KinematicLimits,
         solver: &dyn CartesianSolver,
     ) -> Result<Vec<PlannedSegment>, ProgramError> {
@@ -419,7 +419,7 @@ impl Program {
         let mut state = *start;
         for (k, s) in self.segments.iter().enumerate() {
             let next = self.segments.get(k + 1);
-            let mut target = JointState::at_rest(targets[k]);
+            let mut target = MotionState::at_rest(targets[k]);
             let poly = |p: ProfileKind| matches!(p, ProfileKind::Cubic | ProfileKind::Quintic);
             if let (End::Blend { .. }, Some(n)) = (s.end, next)
                 && poly(s.profile)
@@ -472,7 +472,7 @@ impl Program {
             };
             state = if hand_over >= d {
                 let end = trajectory.sample(d);
-                JointState {
+                MotionState {
                     q: end.q,
                     qd: end.qd,
                     qdd: end.qdd,

@@ -3,7 +3,7 @@
 use crate::piecewise::{Kin, Piecewise};
 use crate::soft::{brake::brake, velocity::velocity_change};
 use crate::sync::limits1;
-use crate::{JointState, KinematicLimits, MAX_JOINTS, Trajectory, TrajectoryError, validate};
+use crate::{KinematicLimits, MAX_JOINTS, MotionState, Trajectory, TrajectoryError, validate};
 
 /// Shortest jerk-limited stop from `start`: every joint independently (NOT
 /// synchronised — each stops as fast as it can) to zero velocity and acceleration,
@@ -14,7 +14,7 @@ use crate::{JointState, KinematicLimits, MAX_JOINTS, Trajectory, TrajectoryError
 /// stopping is always the safest thing to do.
 pub fn stop_trajectory(
     dof: usize,
-    start: &JointState,
+    start: &MotionState,
     limits: &KinematicLimits,
 ) -> Result<Trajectory, TrajectoryError> {
     validate::dof(dof)?;

@@ -11,7 +11,7 @@
 use crate::piecewise::{Kin, Phases, Piecewise};
 use crate::soft::stretch::Stretch;
 use crate::soft::{Limits1, brake::brake, from_state, rest_to_rest};
-use crate::{JointState, KinematicLimits, MAX_JOINTS};
+use crate::{KinematicLimits, MAX_JOINTS, MotionState};
 
 #[derive(Clone, Copy, Default)]
 struct JointWork {
@@ -98,7 +98,7 @@ pub(crate) fn limits1(l: &KinematicLimits, i: usize) -> Limits1 {
 /// between its validated start and target: no position check needed).
 pub(crate) fn plan_soft(
     dof: usize,
-    start: &JointState,
+    start: &MotionState,
     target_q: &crate::JointVector,
     limits: &KinematicLimits,
     min_duration: Option<f64>,

@@ -1,6 +1,6 @@
 //! Input validation: every bad value becomes an error naming the joint and field.
 
-use crate::{JointState, KinematicLimits, MAX_JOINTS, TrajectoryError};
+use crate::{KinematicLimits, MAX_JOINTS, MotionState, TrajectoryError};
 
 /// Tolerance for "inside the limits" checks on a start state (relative).
 pub(crate) const LIMIT_TOL: f64 = 1e-9;
@@ -111,7 +111,7 @@ fn position(
 /// `check_dynamics`.
 pub(crate) fn state(
     dof: usize,
-    s: &JointState,
+    s: &MotionState,
     l: &KinematicLimits,
     which: [&'static str; 3],
     check_dynamics: bool,
@@ -136,8 +136,8 @@ pub(crate) fn state(
 pub(crate) fn all_ok(
     dof: usize,
     l: &KinematicLimits,
-    start: &JointState,
-    target: &JointState,
+    start: &MotionState,
+    target: &MotionState,
     check_dynamics: bool,
 ) -> bool {
     let mut ok = dof <= MAX_JOINTS;
@@ -179,7 +179,7 @@ mod tests {
             2.0,
         ];
         let base_l = KinematicLimits::uniform(1.0, 2.0, 3.0, -1.0, 1.0);
-        let base_s = JointState {
+        let base_s = MotionState {
             q: crate::JointVector::repeat(0.5),
             qd: crate::JointVector::repeat(0.5),
             qdd: crate::JointVector::repeat(-1.0),

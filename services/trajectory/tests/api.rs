@@ -4,15 +4,15 @@
 mod common;
 use common::*;
 use microrobot_trajectory::{
-    Generator, JointState, JointVector, MotionRequest, Profile, Sample, Status, Trajectory,
+    Generator, JointVector, MotionRequest, MotionState, Profile, Sample, Status, Trajectory,
     TrajectoryError, minimum_duration, stop_trajectory,
 };
 
 fn one(profile: Profile, q0: f64, q1: f64) -> MotionRequest {
     MotionRequest {
         dof: 1,
-        start: JointState::at_rest(jv(&[q0])),
-        target: JointState::at_rest(jv(&[q1])),
+        start: MotionState::at_rest(jv(&[q0])),
+        target: MotionState::at_rest(jv(&[q1])),
         profile,
         limits: limits(&[1.0], &[1.0], &[1.0], 10.0),
     }
@@ -188,7 +188,7 @@ fn minimum_duration_respects_the_limits_each_profile_can_honour() {
 #[test]
 fn stop_brings_every_joint_to_rest_independently() {
     let lim = limits(&[1.0, 2.0], &[1.0, 1.0], &[2.0, 2.0], 100.0);
-    let s = JointState {
+    let s = MotionState {
         q: jv(&[0.0, 1.0]),
         qd: jv(&[0.8, -1.5]),
         qdd: jv(&[0.5, 0.0]),
@@ -202,7 +202,7 @@ fn stop_brings_every_joint_to_rest_independently() {
     // 0.8 + 0.5²/(2·2) = 0.8625 < vmax: no brake pre-phase needed.
     assert!(!tr.braked());
     // 0.95 + 0.9²/4 > vmax = 1: the stop brakes first.
-    let fast = JointState {
+    let fast = MotionState {
         qd: jv(&[0.95, 0.0]),
         qdd: jv(&[0.9, 0.0]),
         ..s

@@ -3,7 +3,7 @@
 use microrobot_model::{ModelData, Robot, tool_pose};
 use microrobot_trajectory::model::ModelIk;
 use microrobot_trajectory::program::Program;
-use microrobot_trajectory::{JointState, JointVector, KinematicLimits};
+use microrobot_trajectory::{JointVector, KinematicLimits, MotionState};
 use nalgebra::Rotation3;
 
 fn seed_arm() -> Robot {
@@ -44,7 +44,7 @@ fn cartesian_target_is_reached_through_the_model_ik() {
         y.to_degrees()
     );
     let program = Program::from_toml_str(&text, "ik").expect("loads");
-    let mut start = JointState::default();
+    let mut start = MotionState::default();
     start.q[2] = 1.0;
     let plan = program
         .plan_all(

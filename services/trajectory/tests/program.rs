@@ -9,7 +9,7 @@ use common::*;
 use microrobot_trajectory::program::{
     CartesianPose, CartesianSolver, NoCartesian, Program, ProgramError, ProgramRunner,
 };
-use microrobot_trajectory::{JointState, JointVector, KinematicLimits, Status};
+use microrobot_trajectory::{JointVector, KinematicLimits, MotionState, Status};
 
 fn file(name: &str) -> String {
     let path = format!(
@@ -50,7 +50,7 @@ fn run_continuous(
     runner: &mut ProgramRunner,
     lim: &KinematicLimits,
     smooth: bool,
-) -> (JointState, f64) {
+) -> (MotionState, f64) {
     let dt = 1e-3;
     let mut prev = runner.update(0.0).1;
     let mut t = 0.0;
@@ -87,7 +87,7 @@ fn seed_table4_program_finishes_together_at_5_s() {
     assert_eq!((p.dof, p.segments.len()), (6, 2));
     let lim = seed_arm();
     let plan = p
-        .plan_all(&JointState::default(), &lim, &NoCartesian)
+        .plan_all(&MotionState::default(), &lim, &NoCartesian)
         .expect("plans");
     let main = &plan[1].trajectory;
     assert_close(main.duration(), 5.0, 1e-12, "tf");
@@ -113,7 +113,7 @@ fn blended_quintic_via_points_are_continuous_and_pass_through() {
     let p = Program::from_toml_str(&file("via-points-blend.toml"), "via").expect("loads");
     let lim = seed_arm();
     let plan = p
-        .plan_all(&JointState::default(), &lim, &NoCartesian)
+        .plan_all(&MotionState::default(), &lim, &NoCartesian)
         .expect("plans");
     // Quintics do not honour the jerk limit: bound the per-cycle changes by the peaks.
     let mut bounds = lim;
@@ -143,7 +143,7 @@ fn soft_blend_hands_over_while_moving() {
     let p = Program::from_toml_str(&file("soft-blend.toml"), "soft").expect("loads");
     let lim = seed_arm();
     let plan = p
-        .plan_all(&JointState::default(), &lim, &NoCartesian)
+        .plan_all(&MotionState::default(), &lim, &NoCartesian)
         .expect("plans");
     assert_close(
         plan[0].hand_over,
@@ -206,7 +206,7 @@ fn targets_outside_the_limits_fail_with_the_segment() {
     let text =
         "[program]\nname = \"x\"\ndof = 6\n[[segment]]\nq_deg = [0.0, 0.0, -10.0, 0.0, 0.0, 0.0]\n";
     let p = Program::from_toml_str(text, "f").expect("loads");
-    let start = JointState::at_rest(jv(&[0.0, 0.0, 0.1, 0.0, 0.0, 0.0]));
+    let start = MotionState::at_rest(jv(&[0.0, 0.0, 0.1, 0.0, 0.0, 0.0]));
     let e = p
         .plan_all(&start, &seed_arm(), &NoCartesian)
         .expect_err("joint 3 below 0");
@@ -234,7 +234,7 @@ impl CartesianSolver for FakeIk {
 fn cartesian_targets_go_through_the_solver() {
     let text = "[program]\nname = \"c\"\ndof = 6\n[[segment]]\npose = { xyz_mm = [100.0, 0.0, 0.0], rpy_deg = [0.0, 0.0, 30.0] }\n";
     let p = Program::from_toml_str(text, "c").expect("loads");
-    let start = JointState::at_rest(jv(&[0.0, 0.0, 0.1, 0.0, 0.0, 0.0]));
+    let start = MotionState::at_rest(jv(&[0.0, 0.0, 0.1, 0.0, 0.0, 0.0]));
     let plan = p.plan_all(&start, &seed_arm(), &FakeIk).expect("plans");
     let end = plan[0].trajectory.sample(1e9);
     assert_close(end.q[0], 0.1, 1e-15, "xyz_mm converted");

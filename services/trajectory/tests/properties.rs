@@ -9,7 +9,7 @@ use common::*;
 use microrobot_trajectory::soft::stretch::Stretch;
 use microrobot_trajectory::soft::velocity::{ramp, ramp_from_rest};
 use microrobot_trajectory::soft::{Kin, Limits1, from_state, rest_to_rest, stop_velocity};
-use microrobot_trajectory::{JointState, MotionRequest, Profile, Trajectory, stop_trajectory};
+use microrobot_trajectory::{MotionRequest, MotionState, Profile, Trajectory, stop_trajectory};
 use proptest::prelude::*;
 
 /// Walks the trajectory on a fine grid and checks that q, qd (and qdd when
@@ -321,7 +321,7 @@ proptest! {
     #[test]
     fn stop_reaches_rest_within_limits((l, s, _q1) in joint_problem()) {
         let lim = limits(&[l[0]], &[l[1]], &[l[2]], 1e3);
-        let st = JointState { q: jv(&[s[0]]), qd: jv(&[s[1]]), qdd: jv(&[s[2]]) };
+        let st = MotionState { q: jv(&[s[0]]), qd: jv(&[s[1]]), qdd: jv(&[s[2]]) };
         let tr = stop_trajectory(1, &st, &lim).expect("stops");
         let end = tr.sample(tr.duration());
         prop_assert_eq!((end.qd[0], end.qdd[0]), (0.0, 0.0));
@@ -340,8 +340,8 @@ proptest! {
         for quintic in [false, true] {
             let req = MotionRequest {
                 dof: 1,
-                start: JointState { q: jv(&[q0]), qd: jv(&[v0]), qdd: jv(&[a0]) },
-                target: JointState { q: jv(&[q1]), qd: jv(&[v1]), qdd: jv(&[a1]) },
+                start: MotionState { q: jv(&[q0]), qd: jv(&[v0]), qdd: jv(&[a0]) },
+                target: MotionState { q: jv(&[q1]), qd: jv(&[v1]), qdd: jv(&[a1]) },
                 profile: if quintic { Profile::Quintic { duration: t } } else { Profile::Cubic { duration: t } },
                 limits: lim,
             };
@@ -363,8 +363,8 @@ proptest! {
         let v = f * h / t;
         let req = MotionRequest {
             dof: 1,
-            start: JointState::at_rest(jv(&[q0])),
-            target: JointState::at_rest(jv(&[q1])),
+            start: MotionState::at_rest(jv(&[q0])),
+            target: MotionState::at_rest(jv(&[q1])),
             profile: Profile::Lspb { duration: t, cruise_velocity: Some(jv(&[v])) },
             limits: lim,
         };

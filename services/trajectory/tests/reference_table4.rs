@@ -8,7 +8,7 @@ mod common;
 use common::*;
 use microrobot_trajectory::polynomial::{cubic_coefficients, quintic_coefficients};
 use microrobot_trajectory::soft::{Limits1, rest_to_rest};
-use microrobot_trajectory::{JointState, MotionRequest, Profile, Trajectory};
+use microrobot_trajectory::{MotionRequest, MotionState, Profile, Trajectory};
 
 fn joints() -> Vec<serde_json::Value> {
     load("trajectory_reference.json")["joints"]
@@ -149,13 +149,13 @@ fn cubic_and_quintic_tf5_match_table4() {
         let lim = limits(&[10.0], &[10.0], &[10.0], 4.0);
         let mk = |profile, a0: f64, a1: f64| MotionRequest {
             dof: 1,
-            start: JointState {
+            start: MotionState {
                 qdd: jv(&[a0]),
-                ..JointState::at_rest(jv(&[q0]))
+                ..MotionState::at_rest(jv(&[q0]))
             },
-            target: JointState {
+            target: MotionState {
                 qdd: jv(&[a1]),
-                ..JointState::at_rest(jv(&[q1]))
+                ..MotionState::at_rest(jv(&[q1]))
             },
             profile,
             limits: lim,

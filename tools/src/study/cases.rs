@@ -5,7 +5,7 @@
 use anyhow::{Result, anyhow};
 use microrobot_model::{ModelData, Robot, coriolis_torque, gravity_torque, rnea};
 use microrobot_trajectory::{
-    JointState, JointVector, KinematicLimits, MotionRequest, Peaks, Profile, Trajectory,
+    JointVector, KinematicLimits, MotionRequest, MotionState, Peaks, Profile, Trajectory,
 };
 
 use super::motion::StudyMotion;
@@ -82,7 +82,7 @@ pub fn planning_limits(robot: &Robot) -> KinematicLimits {
 /// The planning problem of `method` at final time `tf`.
 pub fn request(robot: &Robot, motion: &StudyMotion, method: Method, tf: f64) -> MotionRequest {
     let quintic = method == Method::Quintic;
-    let start = JointState {
+    let start = MotionState {
         q: motion.start,
         qd: JointVector::zeros(),
         qdd: if quintic {
@@ -91,7 +91,7 @@ pub fn request(robot: &Robot, motion: &StudyMotion, method: Method, tf: f64) -> 
             JointVector::zeros()
         },
     };
-    let target = JointState {
+    let target = MotionState {
         q: motion.target,
         qd: JointVector::zeros(),
         qdd: if quintic {

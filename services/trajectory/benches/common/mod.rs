@@ -4,7 +4,7 @@
 #![allow(clippy::needless_range_loop, dead_code)]
 
 use microrobot_trajectory::{
-    JointState, JointVector, KinematicLimits, MotionRequest, Profile, Trajectory,
+    JointVector, KinematicLimits, MotionRequest, MotionState, Profile, Trajectory,
 };
 
 /// Seed Table 4 limits (rad, s) for joints 1–6.
@@ -31,8 +31,8 @@ pub fn table4_request() -> MotionRequest {
     }
     MotionRequest {
         dof: 6,
-        start: JointState::at_rest(start),
-        target: JointState::at_rest(target),
+        start: MotionState::at_rest(start),
+        target: MotionState::at_rest(target),
         profile: Profile::Soft { min_duration: None },
         limits: table4_limits(),
     }

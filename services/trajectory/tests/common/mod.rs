@@ -1,7 +1,7 @@
 //! Shared helpers for the integration tests.
 #![allow(dead_code)]
 
-use microrobot_trajectory::{JointState, JointVector, KinematicLimits, MotionRequest, Profile};
+use microrobot_trajectory::{JointVector, KinematicLimits, MotionRequest, MotionState, Profile};
 use serde_json::Value;
 
 pub fn load(name: &str) -> Value {
@@ -49,12 +49,12 @@ pub fn soft_request(
 ) -> MotionRequest {
     MotionRequest {
         dof: q0.len(),
-        start: JointState {
+        start: MotionState {
             q: jv(q0),
             qd: jv(v0),
             qdd: jv(a0),
         },
-        target: JointState::at_rest(jv(q1)),
+        target: MotionState::at_rest(jv(q1)),
         profile: Profile::Soft { min_duration: None },
         limits: lim,
     }
