@@ -9,7 +9,9 @@
 //! reordering are refused within its stream (unit-tested in `microrobot_runtime::validate`);
 //! an injected message is refused on its content before its publisher and sequence number
 //! are looked at. A well-formed, fresh message from the test's own (second) publisher is
-//! refused as such while the pipeline's publisher of that stream is live.
+//! refused as such while the pipeline's publisher of that stream is live; on the torque
+//! stream it is refused as an outsider's (the test is not a process the supervisor
+//! started) and latches the actuator's safe state.
 
 mod common;
 
@@ -322,13 +324,27 @@ fn every_bad_input_class_is_refused_named_counted_and_moves_nothing() {
         m.header.stamp_ns -= 5_000_000_000;
         tq.send(m)
     });
-    // Zero torque would let the arm sag under gravity: it must not be applied.
+    // Zero torque would let the arm sag under gravity: it must not be applied. The test
+    // process is not one the pipeline's supervisor started: an outsider, whose attempt
+    // to drive the arm latches the actuator's safe state (the arm holds).
     expect(
         Actuator,
-        "torque: well-formed, from a second publisher",
-        R::SecondPublisher,
+        "torque: well-formed, from an outsider",
+        R::Outsider,
         &|| tq.send(good_torque()),
     );
+    let latched = statuses.wait(Actuator, "the safe state after an outsider's torque", |s| {
+        s.lifecycle == microrobot_messages::LifecycleState::Fault as u32
+    });
+    assert_eq!(latched.faults, 1, "the run's one fault is the outsider's");
+    // The pipeline's own dynamics still drives the stream: a reset resumes it.
+    let mut reset = common::command(CommandKind::Reset);
+    reset.seq = 1;
+    reset.stamp_ns = monotonic_ns();
+    cmd.send(reset);
+    statuses.wait(Actuator, "active again after a reset", |s| {
+        s.lifecycle == microrobot_messages::LifecycleState::Active as u32
+    });
     // States → planner and dynamics (both subscribe; both refuse).
     for (class, reason, m) in [
         ("state: NaN", R::NonFinite, {
@@ -395,10 +411,15 @@ fn every_bad_input_class_is_refused_named_counted_and_moves_nothing() {
         .filter(|s| s.header.seq != MARK && s.header.stamp_ns >= start_ns)
         .collect();
     assert!(planner_sp.len() > 100, "{}", planner_sp.len());
+    // No motion planned: after the outsider's latch and the reset, the planner may
+    // re-plan a hold from where the arm is (flagged MOVING), but not move it.
+    let planned_speed = planner_sp
+        .iter()
+        .flat_map(|s| (0..6).map(move |j| s.qd[j].abs()))
+        .fold(0.0, f64::max);
     assert!(
-        planner_sp
-            .iter()
-            .all(|s| s.flags & microrobot_messages::setpoint_flags::MOVING == 0)
+        planned_speed < 1e-9,
+        "a setpoint moved at {planned_speed} rad/s"
     );
     // The arm did not move: the measured state over the whole injection window.
     let measured: Vec<_> = streams

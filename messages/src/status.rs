@@ -88,6 +88,9 @@ pub enum RefusalReason {
     TeleopUnavailable = 17,
     TeleopNotAtRest = 18,
     SecondPublisher = 19,
+    /// From a process the pipeline's supervisor did not start (a stream is only ever
+    /// taken by the pipeline's own services).
+    Outsider = 20,
 }
 
 impl RefusalReason {
@@ -115,6 +118,7 @@ impl RefusalReason {
             17 => TeleopUnavailable,
             18 => TeleopNotAtRest,
             19 => SecondPublisher,
+            20 => Outsider,
             _ => return Option::None,
         })
     }
@@ -152,6 +156,7 @@ impl RefusalReason {
             Self::SecondPublisher => {
                 "from a second publisher while the stream's own publisher is live"
             }
+            Self::Outsider => "from a process the pipeline's supervisor did not start",
         }
     }
 }

@@ -473,6 +473,10 @@ fn launch(
             "MICROROBOT_LOCKSTEP".to_string(),
             if cfg.lockstep { "1" } else { "0" }.to_string(),
         ),
+        (
+            microrobot_runtime::provenance::SUPERVISOR_ENV.to_string(),
+            std::process::id().to_string(),
+        ),
     ];
     if let Some(r) = resume {
         env.push((microrobot_actuator::resume::RESUME_ENV.to_string(), r));

@@ -482,6 +482,10 @@ fn launch_for(
             "MICROROBOT_LOCKSTEP".to_string(),
             if cfg.lockstep { "1" } else { "0" }.to_string(),
         ),
+        (
+            microrobot_runtime::provenance::SUPERVISOR_ENV.to_string(),
+            std::process::id().to_string(),
+        ),
     ];
     let argv = match (&cfg.actuator.command, role) {
         (Some(cmd), ServiceRole::Actuator) => cmd

@@ -235,12 +235,39 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         publisher: u128,
         now_ns: u64,
     ) -> Result<(), Refusal> {
+        self.accept_torque_from(msg, publisher, now_ns, || true)
+    }
+
+    /// [`Self::accept_torque`], where a well-formed command from a publisher the stream
+    /// does not follow yet is taken only if `from_pipeline()` says the pipeline's
+    /// supervisor started its process (the stage asks [`microrobot_runtime::provenance`]).
+    /// One that is not is refused ([`Refusal::Outsider`]) and, with the drives on,
+    /// latches the safe state: someone is trying to drive the arm.
+    pub fn accept_torque_from(
+        &mut self,
+        msg: &TorqueCommand,
+        publisher: u128,
+        now_ns: u64,
+        from_pipeline: impl FnOnce() -> bool,
+    ) -> Result<(), Refusal> {
         let r = check_torque(msg, self.dof)
             .and_then(|()| {
                 if self.lockstep {
                     Ok(())
                 } else {
                     check_fresh(msg.header.stamp_ns, now_ns, self.stale_ns)
+                }
+            })
+            .and_then(|()| {
+                if self.seq.is_new_publisher(publisher) && !from_pipeline() {
+                    if !self.safety.latched() && self.hw.state() == LifecycleState::Active {
+                        self.counters.faults += 1;
+                        let q = self.last_measured.q;
+                        self.safety.on_fault(&q);
+                    }
+                    Err(Refusal::Outsider)
+                } else {
+                    Ok(())
                 }
             })
             .and_then(|()| self.seq.accept(publisher, msg.header.seq, now_ns))

@@ -101,7 +101,9 @@ where
     let inst = cfg.instance.as_str();
     let node = open_node(inst, ServiceRole::Actuator)?;
 
-    let torque_sub = open_publish_subscribe::<TorqueCommand>(&node, inst, ServiceKind::Torque)?
+    let torque_svc = open_publish_subscribe::<TorqueCommand>(&node, inst, ServiceKind::Torque)?;
+    let mut provenance = microrobot_runtime::provenance::Provenance::from_env();
+    let torque_sub = torque_svc
         .subscriber_builder()
         .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
         .history_request(0)
@@ -255,7 +257,7 @@ where
         if ready.contains(on_stop) || shutdown.is_requested() {
             break;
         }
-        let was_latched = core.safe_state_latched();
+        let mut was_latched = core.safe_state_latched();
         // Before any queued command can feed the watchdog: was this process stalled?
         if let Some(gap) = core.on_wake(monotonic_ns()) {
             tracing::warn!(
@@ -271,7 +273,17 @@ where
                 let publisher = sample.header().publisher_id().value();
                 drop(sample);
                 let now = monotonic_ns();
-                if core.accept_torque(&msg, publisher, now).is_ok() {
+                let verdict = core.accept_torque_from(&msg, publisher, now, || {
+                    provenance.check(&torque_svc, publisher)
+                        == microrobot_runtime::provenance::Origin::Pipeline
+                });
+                if verdict == Err(Refusal::Outsider) && !was_latched && core.safe_state_latched() {
+                    was_latched = true;
+                    tracing::error!(
+                        "actuator: a torque command from a process the supervisor did not start: refused, safe state latched; send a reset once the pipeline's own dynamics publishes again"
+                    );
+                }
+                if verdict.is_ok() {
                     accepted = msg.header.seq;
                     e2e.record(now.saturating_sub(msg.header.source_stamp_ns));
                     if !cfg.lockstep && !phased {

@@ -7,6 +7,7 @@
 
 pub mod config;
 pub mod node;
+pub mod provenance;
 pub mod reactor;
 pub mod rt;
 pub mod shutdown;

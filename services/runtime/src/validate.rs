@@ -21,6 +21,8 @@ pub enum Refusal {
     OutOfLimits,
     /// From a second publisher while the stream's publisher is still live.
     SecondPublisher,
+    /// From a process outside the pipeline ([`crate::provenance`]).
+    Outsider,
 }
 
 impl Refusal {
@@ -33,6 +35,7 @@ impl Refusal {
             Self::Stale => RefusalReason::Stale,
             Self::OutOfLimits => RefusalReason::OutOfLimits,
             Self::SecondPublisher => RefusalReason::SecondPublisher,
+            Self::Outsider => RefusalReason::Outsider,
         }
     }
 }
@@ -128,6 +131,14 @@ impl SeqTracker {
         self.last = Some(seq);
         self.owner.accepted(publisher, now_ns);
         Ok(())
+    }
+
+    /// Whether a message from `publisher` would come from a publisher other than the
+    /// one the stream follows (the first, a takeover or an intruder): the stage then
+    /// checks where it comes from ([`crate::provenance`]) before it is taken.
+    #[inline]
+    pub fn is_new_publisher(&self, publisher: u128) -> bool {
+        self.owner.publisher != Some(publisher)
     }
 
     /// Times another publisher took the stream over (restarts seen).
