@@ -801,6 +801,8 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     };
 
     let mut outcome: Option<(Stop, u8, String)> = None;
+    // Why the recorder stopped before the end, if it did.
+    let mut recorder_failed: Option<String> = None;
     // What the verdict needs beyond the stop: every death (restarted or not) and when the
     // actuator's safe state latched (cleared again by a reset).
     let mut deaths: Vec<String> = Vec::new();
@@ -1047,6 +1049,21 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
                 }
             }
         }
+        // A recorder that stops mid-run (a full disk, a write error) is said at once; the
+        // pipeline keeps running, and the verdict names it at the end.
+        if recorder_failed.is_none()
+            && let Some(r) = recorder.as_mut()
+            && let Some(st) = r.poll_exit()
+        {
+            let msg = format!(
+                "the recorder stopped {:.1} s into the run ({}): {}",
+                started.elapsed().as_secs_f64(),
+                describe(st),
+                log_tail(&r.launch.log, 2).replace('\n', " | ")
+            );
+            progress.note(&format!("error: {msg}; the pipeline keeps running"));
+            recorder_failed = Some(msg);
+        }
         if outcome.is_none() {
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -1057,7 +1074,9 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     let all_clean = pipe.stop_all(&mut monitor, grace);
     let recorded = recorder.as_mut().is_none_or(|r| stop_recorder(r, grace));
     progress.finish();
-    if !recorded {
+    if let Some(msg) = &recorder_failed {
+        eprintln!("error: {msg}");
+    } else if !recorded {
         eprintln!(
             "error: the recorder did not finish its file cleanly (see its log in {})",
             run_dir.display()
@@ -1080,7 +1099,11 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     }
     if code == exit_code::OK && !recorded {
         code = exit_code::FAILURE;
-        failures.push("the recorder did not finish its file cleanly".into());
+        failures.push(
+            recorder_failed
+                .clone()
+                .unwrap_or_else(|| "the recorder did not finish its file cleanly".into()),
+        );
     }
     if code == exit_code::OK && !all_clean {
         let msg = format!("not every service exited cleanly ({})", exits.join(", "));
