@@ -6,30 +6,18 @@ mod common;
 
 use common::*;
 
-#[test]
-fn a_short_soak_with_a_kill_of_each_service_recovers_without_jumps_or_losses() {
-    let dir = tempfile::tempdir().expect("tempdir");
-    let inst = instance("soak");
-    let cfg = write_config(dir.path(), &inst, "", "");
-    let out = dir.path().join("soak");
-    let done = run(
-        &[
-            "soak",
-            "--config",
-            cfg.to_str().expect("utf-8"),
-            "--instance",
-            &inst,
-            "--duration",
-            "32s",
-            "--kill-every",
-            "5",
-            "--random-commands",
-            "--quiet",
-            "--out",
-            out.to_str().expect("utf-8"),
-        ],
-        240.0,
-    );
+/// Runs `microrobot soak` on a fresh instance with `extra` flags into `<dir>/soak`;
+/// returns the process's output and the parsed report.json.
+fn soak(dir: &std::path::Path, name: &str, extra: &[&str]) -> (Finished, serde_json::Value) {
+    let inst = instance(name);
+    let cfg = write_config(dir, &inst, "", "");
+    let out = dir.join("soak");
+    let cfg_s = cfg.to_str().expect("utf-8").to_string();
+    let out_s = out.to_str().expect("utf-8").to_string();
+    let mut args = vec!["soak", "--config", &cfg_s, "--instance", &inst];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--quiet", "--out", &out_s]);
+    let done = run(&args, 240.0);
     let text = std::fs::read_to_string(out.join("report.json")).unwrap_or_else(|e| {
         panic!(
             "no report.json ({e}); exit {:?}\nstdout:\n{}\nstderr:\n{}",
@@ -38,7 +26,25 @@ fn a_short_soak_with_a_kill_of_each_service_recovers_without_jumps_or_losses() {
             done.stderr
         )
     });
-    let r: serde_json::Value = serde_json::from_str(&text).expect("report is JSON");
+    let r = serde_json::from_str(&text).expect("report is JSON");
+    (done, r)
+}
+
+#[test]
+fn a_short_soak_with_a_kill_of_each_service_recovers_without_jumps_or_losses() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("soak");
+    let (done, r) = soak(
+        dir.path(),
+        "soak",
+        &[
+            "--duration",
+            "32s",
+            "--kill-every",
+            "5",
+            "--random-commands",
+        ],
+    );
     let v = &r["verdict"];
     let ctx = || {
         format!(
@@ -106,37 +112,19 @@ fn a_short_soak_with_a_kill_of_each_service_recovers_without_jumps_or_losses() {
 #[test]
 fn a_soak_with_stalls_catches_each_hung_service_and_recovers() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let inst = instance("soak-stall");
-    let cfg = write_config(dir.path(), &inst, "", "");
     let out = dir.path().join("soak");
-    let done = run(
+    let (done, r) = soak(
+        dir.path(),
+        "soak-stall",
         &[
-            "soak",
-            "--config",
-            cfg.to_str().expect("utf-8"),
-            "--instance",
-            &inst,
             "--duration",
             "36s",
             "--stall-every",
             "6",
             "--stall-for",
             "2s",
-            "--quiet",
-            "--out",
-            out.to_str().expect("utf-8"),
         ],
-        240.0,
     );
-    let text = std::fs::read_to_string(out.join("report.json")).unwrap_or_else(|e| {
-        panic!(
-            "no report.json ({e}); exit {:?}\nstdout:\n{}\nstderr:\n{}",
-            done.code(),
-            done.stdout,
-            done.stderr
-        )
-    });
-    let r: serde_json::Value = serde_json::from_str(&text).expect("report is JSON");
     let v = &r["verdict"];
     let ctx = || {
         format!(

@@ -82,12 +82,12 @@ fn wire_enums_round_trip_and_refuse_unknown_values() {
     assert_eq!(TargetSpace::from_wire(3), None);
     assert_eq!(ServiceRole::from_wire(4), None);
     assert_eq!(LifecycleState::from_wire(5), None);
-    for v in 0..=19 {
+    for v in 0..=20 {
         let r = RefusalReason::from_wire(v).expect("known reason");
         assert_eq!(r as u32, v);
         assert!(!r.describe().is_empty());
     }
-    assert_eq!(RefusalReason::from_wire(20), None);
+    assert_eq!(RefusalReason::from_wire(21), None);
     for v in 0..=5 {
         let p = ProgramState::from_wire(v).expect("known program state");
         assert_eq!(p as u32, v);

@@ -448,7 +448,7 @@ fn load_config(args: &DriverCheckArgs) -> anyhow::Result<PipelineConfig> {
     PipelineConfig::from_toml_str(&cfg.to_toml_string(), &origin, base).map_err(anyhow::Error::new)
 }
 
-/// The driver's launch, as `microrobot run` builds it.
+/// The driver's launch, as `microrobot run` builds it (this process is its supervisor).
 fn launch(
     args: &DriverCheckArgs,
     cfg: &PipelineConfig,
@@ -456,34 +456,13 @@ fn launch(
     run_dir: &Path,
     resume: Option<String>,
 ) -> Launch {
-    let subst = |a: &String| {
-        a.replace("{instance}", &cfg.instance)
-            .replace("{config}", &resolved.display().to_string())
-            .replace("{rate_hz}", &cfg.rate_hz.to_string())
-            .replace("{run_dir}", &run_dir.display().to_string())
-    };
-    let mut env = vec![
-        ("MICROROBOT_INSTANCE".to_string(), cfg.instance.clone()),
-        (
-            "MICROROBOT_CONFIG".to_string(),
-            resolved.display().to_string(),
-        ),
-        ("MICROROBOT_RATE_HZ".to_string(), cfg.rate_hz.to_string()),
-        (
-            "MICROROBOT_LOCKSTEP".to_string(),
-            if cfg.lockstep { "1" } else { "0" }.to_string(),
-        ),
-        (
-            microrobot_runtime::provenance::SUPERVISOR_ENV.to_string(),
-            std::process::id().to_string(),
-        ),
-    ];
+    let mut env = crate::run::service_env(cfg, resolved);
     if let Some(r) = resume {
         env.push((microrobot_actuator::resume::RESUME_ENV.to_string(), r));
     }
     Launch {
         role: "actuator",
-        argv: args.command.iter().map(subst).collect(),
+        argv: crate::run::driver_argv(&args.command, cfg, resolved, run_dir),
         env,
         log: run_dir.join("driver.log"),
     }

@@ -461,17 +461,10 @@ fn role_name(role: ServiceRole) -> &'static str {
     role.name()
 }
 
-/// The launch of `role`: `microrobot service <role> --config <resolved>` or the
-/// configured external actuator command (placeholders `{instance}`, `{config}`,
-/// `{rate_hz}`, `{run_dir}` substituted; the same values are in the environment).
-fn launch_for(
-    role: ServiceRole,
-    cfg: &PipelineConfig,
-    resolved: &Path,
-    run_dir: &Path,
-) -> anyhow::Result<Launch> {
-    let exe = std::env::current_exe().context("cannot find the microrobot executable")?;
-    let env = vec![
+/// The environment every service (and an external driver) gets: instance, resolved
+/// config, rate, lockstep, and the supervisor's pid (see `microrobot_runtime::provenance`).
+pub fn service_env(cfg: &PipelineConfig, resolved: &Path) -> Vec<(String, String)> {
+    vec![
         ("MICROROBOT_INSTANCE".to_string(), cfg.instance.clone()),
         (
             "MICROROBOT_CONFIG".to_string(),
@@ -486,17 +479,39 @@ fn launch_for(
             microrobot_runtime::provenance::SUPERVISOR_ENV.to_string(),
             std::process::id().to_string(),
         ),
-    ];
+    ]
+}
+
+/// An external driver's command line with `{instance}`, `{config}`, `{rate_hz}` and
+/// `{run_dir}` substituted.
+pub fn driver_argv(
+    command: &[String],
+    cfg: &PipelineConfig,
+    resolved: &Path,
+    run_dir: &Path,
+) -> Vec<String> {
+    command
+        .iter()
+        .map(|a| {
+            a.replace("{instance}", &cfg.instance)
+                .replace("{config}", &resolved.display().to_string())
+                .replace("{rate_hz}", &cfg.rate_hz.to_string())
+                .replace("{run_dir}", &run_dir.display().to_string())
+        })
+        .collect()
+}
+
+/// The launch of `role`: `microrobot service <role> --config <resolved>` or the
+/// configured external actuator command ([`driver_argv`]; [`service_env`] either way).
+fn launch_for(
+    role: ServiceRole,
+    cfg: &PipelineConfig,
+    resolved: &Path,
+    run_dir: &Path,
+) -> anyhow::Result<Launch> {
+    let exe = std::env::current_exe().context("cannot find the microrobot executable")?;
     let argv = match (&cfg.actuator.command, role) {
-        (Some(cmd), ServiceRole::Actuator) => cmd
-            .iter()
-            .map(|a| {
-                a.replace("{instance}", &cfg.instance)
-                    .replace("{config}", &resolved.display().to_string())
-                    .replace("{rate_hz}", &cfg.rate_hz.to_string())
-                    .replace("{run_dir}", &run_dir.display().to_string())
-            })
-            .collect(),
+        (Some(cmd), ServiceRole::Actuator) => driver_argv(cmd, cfg, resolved, run_dir),
         _ => vec![
             exe.display().to_string(),
             "service".to_string(),
@@ -508,7 +523,7 @@ fn launch_for(
     Ok(Launch {
         role: role_name(role),
         argv,
-        env,
+        env: service_env(cfg, resolved),
         log: run_dir.join(format!("{}.log", role.name())),
     })
 }
