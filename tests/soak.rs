@@ -86,6 +86,26 @@ fn a_short_soak_with_a_kill_of_each_service_recovers_without_jumps_or_losses() {
     );
     assert_eq!(v["pass"], true, "{}", ctx());
     assert_eq!(done.code(), Some(0), "{}", ctx());
+    // The per-hop budget: every hop timed, and the chain no shorter than its first hop.
+    let hops = r["hop_budget_us"].as_array().expect("hop budget");
+    let hop = |name: &str| {
+        hops.iter()
+            .find(|h| h[0] == name)
+            .map(|h| h[1].clone())
+            .unwrap_or_else(|| panic!("hop {name} missing: {hops:?}"))
+    };
+    for name in ["setpoint_to_torque", "torque_to_state", "setpoint_to_state"] {
+        assert!(
+            hop(name)["count"].as_u64().expect("count") > 1000,
+            "{name}: {hops:?}"
+        );
+    }
+    let p50 = |name: &str| hop(name)["p50"].as_f64().expect("p50");
+    assert!(
+        p50("setpoint_to_state") >= p50("setpoint_to_torque"),
+        "{hops:?}"
+    );
+    assert!(out.join("latency_histogram.png").is_file());
     // The markdown is rendered from the same report, and `--render` reproduces it.
     let md = std::fs::read_to_string(out.join("report.md")).expect("report.md");
     assert!(md.contains("**Verdict: PASS**"), "{md}");

@@ -49,6 +49,15 @@ impl LatencyHistogram {
         self.hist.reset();
     }
 
+    /// Every non-empty bucket as `(value_ns, count)`, ascending: the histogram to draw
+    /// (allocates; for reports, not for a control cycle).
+    pub fn buckets(&self) -> Vec<(u64, u64)> {
+        self.hist
+            .iter_recorded()
+            .map(|v| (v.value_iterated_to(), v.count_at_value()))
+            .collect()
+    }
+
     /// Percentiles for the status message (zeros when empty).
     pub fn summary(&self) -> LatencySummary {
         if self.hist.is_empty() {

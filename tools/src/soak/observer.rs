@@ -3,7 +3,8 @@
 //! messages, 64 ms at 1 kHz), checks every consecutive pair for continuity
 //! ([`super::continuity`]), and keeps only what the report needs: health edges (for the
 //! time to detect and recover each fault), safe-state latches, lost-message increments
-//! of the services, resource samples, and its own receive gaps.
+//! of the services, resource samples, its own receive gaps, and the per-hop latency
+//! budget measured from the messages' own stamps ([`Hops`]).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -13,10 +14,13 @@ use std::time::Duration;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use microrobot_messages::{
-    JointSetpoint, JointState, LifecycleState, MAX_JOINTS, ServiceKind, ServiceRole, ServiceStatus,
-    TorqueCommand, monotonic_ns, open_publish_subscribe, setpoint_flags, state_flags, torque_flags,
+    Header, JointSetpoint, JointState, LifecycleState, MAX_JOINTS, ServiceKind, ServiceRole,
+    ServiceStatus, TorqueCommand, monotonic_ns, open_publish_subscribe, setpoint_flags,
+    state_flags, torque_flags,
 };
 use serde::{Deserialize, Serialize};
+
+use microrobot_runtime::stats::LatencyHistogram;
 
 use super::continuity::{self, Bounds, Jump};
 
@@ -70,9 +74,46 @@ pub struct ResourceSample {
     pub cpu_time_ms: u32,
 }
 
+/// Torque stamps kept for joining a state to the torque it applied (by `torque_seq`).
+const TORQUE_STAMPS: usize = 1024;
+/// States waiting for a torque the observer has not read yet (see `time_state`).
+const PENDING_STATES: usize = 16;
+
+/// The pipeline's latency split by hop, from the stamps every message carries
+/// (`stamp_ns` when written, `source_stamp_ns` of the setpoint it derives from; all
+/// `CLOCK_MONOTONIC`, so the hops add up on one clock):
+/// - `setpoint_to_torque`: setpoint published → torque published (the dynamics'
+///   wake-up, its computation and its write);
+/// - `torque_to_state`: torque published → the first state published that applied it
+///   (the actuator's wake-up, its plant or bus step and its write);
+/// - `setpoint_to_state`: the whole chain on the bus, setpoint → that state.
+///
+/// The actuator's own end-to-end figure (setpoint published → torque received) sits
+/// between the first hop and the chain. Histograms are made up front; recording never
+/// allocates.
+#[derive(Debug, Default)]
+pub struct Hops {
+    pub setpoint_to_torque: LatencyHistogram,
+    pub torque_to_state: LatencyHistogram,
+    pub setpoint_to_state: LatencyHistogram,
+}
+
+impl Hops {
+    /// The hops by name, in chain order.
+    pub fn named(&self) -> [(&'static str, &LatencyHistogram); 3] {
+        [
+            ("setpoint_to_torque", &self.setpoint_to_torque),
+            ("torque_to_state", &self.torque_to_state),
+            ("setpoint_to_state", &self.setpoint_to_state),
+        ]
+    }
+}
+
 /// What the observer hands back at the end.
 #[derive(Debug, Default)]
 pub struct Observed {
+    /// Latency per hop (see [`Hops`]).
+    pub hops: Hops,
     pub edges: Vec<Edge>,
     pub jumps: Vec<Jump>,
     pub losses: Vec<Loss>,
@@ -230,6 +271,16 @@ pub struct Checker {
     state_safe: bool,
     /// Per role: last status (pid, lost, last resource sample time).
     status: [Option<(u32, u64, u64)>; 3],
+    /// `(seq, stamp_ns)` of recent torques of the current torque publisher, at
+    /// `seq % TORQUE_STAMPS`.
+    torque_stamps: Box<[(u64, u64); TORQUE_STAMPS]>,
+    /// The last `torque_seq` a state was timed for (a free-running actuator applies one
+    /// torque over several plant steps; only the first state that applied it counts).
+    timed_torque_seq: u64,
+    /// The newest torque seq read from the current torque publisher.
+    newest_torque_seq: Option<u64>,
+    /// States (their torque seq and header) whose torque the observer has not read yet.
+    pending_states: Vec<(u64, Header)>,
 }
 
 fn role_slot(role: ServiceRole) -> usize {
@@ -254,6 +305,78 @@ impl Checker {
             state_healthy: None,
             state_safe: false,
             status: [None; 3],
+            torque_stamps: Box::new([(u64::MAX, 0); TORQUE_STAMPS]),
+            timed_torque_seq: u64::MAX,
+            newest_torque_seq: None,
+            pending_states: Vec::with_capacity(PENDING_STATES),
+        }
+    }
+
+    /// Times the hops a torque closes (see [`Hops`]).
+    fn time_torque(&mut self, m: &TorqueCommand, new_publisher: bool) {
+        if new_publisher {
+            self.torque_stamps.fill((u64::MAX, 0));
+        }
+        if new_publisher {
+            self.newest_torque_seq = None;
+        }
+        self.torque_stamps[(m.header.seq % TORQUE_STAMPS as u64) as usize] =
+            (m.header.seq, m.header.stamp_ns);
+        self.newest_torque_seq = Some(m.header.seq);
+        if let Some(i) = self
+            .pending_states
+            .iter()
+            .position(|(s, _)| *s == m.header.seq)
+        {
+            let (_, h) = self.pending_states.remove(i);
+            self.record_state_hops(h, m.header.stamp_ns);
+        }
+        self.pending_states.retain(|(s, _)| *s > m.header.seq);
+        if m.header.source_stamp_ns > 0 && m.header.stamp_ns >= m.header.source_stamp_ns {
+            self.out
+                .hops
+                .setpoint_to_torque
+                .record(m.header.stamp_ns - m.header.source_stamp_ns);
+        }
+    }
+
+    /// Times the hops a state closes: only the first state that applied a torque, and
+    /// only a torque of the current publisher. The observer drains the torque stream
+    /// before the state stream, so a state may name a torque it has not read yet: that
+    /// state waits in `pending_states` for its torque.
+    fn time_state(&mut self, m: &JointState, new_publisher: bool) {
+        if new_publisher {
+            self.timed_torque_seq = u64::MAX;
+            self.pending_states.clear();
+        }
+        let seq = m.torque_seq;
+        if seq == u64::MAX || seq == self.timed_torque_seq {
+            return;
+        }
+        self.timed_torque_seq = seq;
+        let (kept_seq, torque_stamp) = self.torque_stamps[(seq % TORQUE_STAMPS as u64) as usize];
+        if kept_seq == seq {
+            self.record_state_hops(m.header, torque_stamp);
+        } else if self.newest_torque_seq.is_none_or(|n| seq > n) {
+            if self.pending_states.len() == PENDING_STATES {
+                self.pending_states.remove(0);
+            }
+            self.pending_states.push((seq, m.header));
+        }
+    }
+
+    fn record_state_hops(&mut self, h: Header, torque_stamp_ns: u64) {
+        if h.stamp_ns >= torque_stamp_ns {
+            self.out
+                .hops
+                .torque_to_state
+                .record(h.stamp_ns - torque_stamp_ns);
+        }
+        if h.source_stamp_ns > 0 && h.stamp_ns >= h.source_stamp_ns {
+            self.out
+                .hops
+                .setpoint_to_state
+                .record(h.stamp_ns - h.source_stamp_ns);
         }
     }
 
@@ -341,6 +464,11 @@ impl Checker {
 
     pub fn torque(&mut self, m: &TorqueCommand, publisher: u128) {
         self.out.received[1] += 1;
+        let new_publisher = self
+            .torque
+            .as_ref()
+            .is_some_and(|l| l.publisher != publisher);
+        self.time_torque(m, new_publisher);
         let mut found = Vec::new();
         match &self.torque {
             Some(last) if last.publisher == publisher => {
@@ -378,6 +506,11 @@ impl Checker {
 
     pub fn state(&mut self, m: &JointState, publisher: u128) {
         self.out.received[2] += 1;
+        let new_publisher = self
+            .state
+            .as_ref()
+            .is_some_and(|l| l.publisher != publisher);
+        self.time_state(m, new_publisher);
         let mut found = Vec::new();
         match &self.state {
             Some(last) if last.publisher == publisher => {
@@ -477,4 +610,95 @@ impl Checker {
 /// `CLOCK_MONOTONIC` now (re-exported for the soak's own timeline).
 pub fn now_ns() -> u64 {
     monotonic_ns()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn checker() -> Checker {
+        let b = Bounds {
+            dof: 1,
+            period_s: 1e-3,
+            tol: 0.5,
+            vmax: [10.0; MAX_JOINTS],
+            amax: [1e3; MAX_JOINTS],
+            tau_max: [1e3; MAX_JOINTS],
+            noise_q: 0.0,
+            noise_qd: 0.0,
+        };
+        Checker::new(b, Arc::new(Live::default()), Arc::new(Mutex::new(None)))
+    }
+
+    /// A torque of `seq` for the setpoint published at `source_ns`, written at `stamp_ns`.
+    fn torque(seq: u64, source_ns: u64, stamp_ns: u64) -> TorqueCommand {
+        let mut t = TorqueCommand::default();
+        t.header.seq = seq;
+        t.header.tick = seq;
+        t.header.source_stamp_ns = source_ns;
+        t.header.stamp_ns = stamp_ns;
+        t.setpoint_seq = seq;
+        t.dof = 1;
+        t
+    }
+
+    fn state(seq: u64, torque_seq: u64, source_ns: u64, stamp_ns: u64) -> JointState {
+        let mut s = JointState::default();
+        s.header.seq = seq;
+        s.header.tick = torque_seq;
+        s.header.source_stamp_ns = source_ns;
+        s.header.stamp_ns = stamp_ns;
+        s.torque_seq = torque_seq;
+        s.lifecycle = LifecycleState::Active as u32;
+        s.dof = 1;
+        s
+    }
+
+    #[test]
+    fn hops_are_timed_from_the_stamps_once_per_torque() {
+        let mut c = checker();
+        // Setpoints published at k ms; torque k 20 µs later; the state that applies it
+        // 500 µs after the torque, then a second plant step on the same torque.
+        for k in 1..=3u64 {
+            let sp = k * 1_000_000;
+            c.torque(&torque(k, sp, sp + 20_000), 1);
+            c.state(&state(2 * k - 1, k, sp, sp + 520_000), 2);
+            c.state(&state(2 * k, k, sp, sp + 1_020_000), 2);
+        }
+        let h = &c.out.hops;
+        assert_eq!(h.setpoint_to_torque.len(), 3);
+        assert_eq!(h.torque_to_state.len(), 3, "one state per torque is timed");
+        assert_eq!(h.setpoint_to_state.len(), 3);
+        let near = |got: u64, want: u64| got.abs_diff(want) <= want / 500;
+        assert!(near(h.setpoint_to_torque.summary().max_ns, 20_000));
+        assert!(near(h.torque_to_state.summary().max_ns, 500_000));
+        assert!(near(h.setpoint_to_state.summary().p50_ns, 520_000));
+    }
+
+    #[test]
+    fn a_state_read_before_its_torque_waits_for_it() {
+        let mut c = checker();
+        c.torque(&torque(1, 1_000_000, 1_030_000), 1);
+        c.state(&state(1, 1, 1_000_000, 1_100_000), 2);
+        // The observer reads state 2 (applying torque 2) before torque 2.
+        c.state(&state(2, 2, 2_000_000, 2_200_000), 2);
+        assert_eq!(c.out.hops.torque_to_state.len(), 1);
+        c.torque(&torque(2, 2_000_000, 2_050_000), 1);
+        assert_eq!(c.out.hops.torque_to_state.len(), 2);
+        let max = c.out.hops.torque_to_state.summary().max_ns;
+        assert!(max.abs_diff(150_000) <= 300, "{max}");
+    }
+
+    #[test]
+    fn a_new_torque_publisher_forgets_the_old_ones_stamps() {
+        let mut c = checker();
+        c.torque(&torque(7, 1_000_000, 1_020_000), 1);
+        // A restarted dynamics numbers from 1 again; a state naming seq 7 now means
+        // nothing the observer can time.
+        c.torque(&torque(1, 2_000_000, 2_020_000), 3);
+        c.state(&state(1, 7, 1_000_000, 2_500_000), 2);
+        assert_eq!(c.out.hops.torque_to_state.len(), 0);
+        c.state(&state(2, 1, 2_000_000, 2_600_000), 2);
+        assert_eq!(c.out.hops.torque_to_state.len(), 1);
+    }
 }

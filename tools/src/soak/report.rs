@@ -145,6 +145,14 @@ pub struct Report {
     pub thresholds: BTreeMap<String, String>,
     pub verdict: Verdict,
     pub e2e_latency_us: Percentiles,
+    /// The latency split by hop, from the messages' own stamps (see
+    /// `soak::observer::Hops`), in chain order.
+    #[serde(default)]
+    pub hop_budget_us: Vec<(String, Percentiles)>,
+    /// Per hop, `(latency_us, count)` of every non-empty histogram bucket (drawn as
+    /// `latency_histogram.png`; not in the JSON).
+    #[serde(skip)]
+    pub hop_histograms: Vec<(String, Vec<(f64, u64)>)>,
     pub planner_lateness_us: Percentiles,
     pub deadline_misses: u64,
     pub floor: Option<Floor>,
@@ -179,6 +187,25 @@ pub struct Report {
     pub resources: BTreeMap<String, Resources>,
     /// `microrobot run`'s summary of the same run.
     pub pipeline: Summary,
+}
+
+/// Re-bins hdrhistogram buckets `(value_ns, count)` into 1 µs bins, every bin from the
+/// first to the last (empty ones as 0) while that is at most 100 000 bins; beyond, only
+/// the non-empty ones.
+fn microsecond_bins(buckets: &[(u64, u64)]) -> Vec<(f64, u64)> {
+    let mut bins = BTreeMap::<u64, u64>::new();
+    for &(ns, n) in buckets {
+        *bins.entry(ns / 1000).or_default() += n;
+    }
+    let (Some((&lo, _)), Some((&hi, _))) = (bins.first_key_value(), bins.last_key_value()) else {
+        return Vec::new();
+    };
+    if hi - lo > 100_000 {
+        return bins.into_iter().map(|(us, n)| (us as f64, n)).collect();
+    }
+    (lo..=hi)
+        .map(|us| (us as f64, bins.get(&us).copied().unwrap_or(0)))
+        .collect()
 }
 
 /// Inputs of [`Report::build`] besides what was observed.
@@ -514,6 +541,18 @@ impl Report {
             thresholds: facts.thresholds,
             verdict: v,
             e2e_latency_us: pipeline.e2e_latency_us,
+            hop_budget_us: obs
+                .hops
+                .named()
+                .iter()
+                .map(|(k, h)| (k.to_string(), Percentiles::from(&h.summary())))
+                .collect(),
+            hop_histograms: obs
+                .hops
+                .named()
+                .iter()
+                .map(|(k, h)| (k.to_string(), microsecond_bins(&h.buckets())))
+                .collect(),
             planner_lateness_us: pipeline.planner_lateness_us,
             deadline_misses: pipeline.deadline_misses,
             floor,
@@ -558,7 +597,44 @@ impl Report {
         let p = dir.join("report.md");
         std::fs::write(&p, self.markdown("Soak report"))
             .with_context(|| format!("cannot write {}", p.display()))?;
+        if self.hop_histograms.iter().any(|(_, b)| !b.is_empty()) {
+            self.draw_histogram(&dir.join("latency_histogram.png"))?;
+        }
         Ok(())
+    }
+
+    /// A LinuxCNC-style latency histogram per hop: latency in 1 µs bins against
+    /// log10(1 + messages in the bin), so the rare tail shows beside the mode.
+    fn draw_histogram(&self, path: &Path) -> anyhow::Result<()> {
+        use crate::study::plot::{Panel, Series, draw};
+        let panels: Vec<Panel> = self
+            .hop_histograms
+            .iter()
+            .enumerate()
+            .map(|(i, (hop, buckets))| Panel {
+                title: hop.replace('_', " "),
+                x_label: "latency (µs)".into(),
+                y_label: "log10(1 + messages)".into(),
+                series: vec![Series {
+                    label: String::new(),
+                    color: i,
+                    points: buckets
+                        .iter()
+                        .map(|&(us, n)| (us, (n as f64 + 1.0).log10()))
+                        .collect(),
+                }],
+                scatter: false,
+                equal_axes: false,
+            })
+            .collect();
+        let rows = panels.len().max(1);
+        draw(
+            path,
+            (1200, 80 + 300 * rows as u32),
+            (rows, 1),
+            "Latency histogram per hop",
+            &panels,
+        )
     }
 
     /// The report as markdown under the heading `title`.
@@ -648,6 +724,15 @@ impl Report {
             "| end-to-end (setpoint publish → torque at the actuator) | {} | |",
             p(&self.e2e_latency_us)
         );
+        for (hop, x) in &self.hop_budget_us {
+            let what = match hop.as_str() {
+                "setpoint_to_torque" => "hop: setpoint publish → torque publish (dynamics)",
+                "torque_to_state" => "hop: torque publish → state publish (actuator)",
+                "setpoint_to_state" => "chain: setpoint publish → state publish",
+                other => other,
+            };
+            let _ = writeln!(s, "| {what} | {} | |", p(x));
+        }
         let _ = writeln!(
             s,
             "| planner lateness (wake-up − ideal tick) | {} | {} |",
