@@ -12,6 +12,7 @@
 //! `messages/README.md` for the field-by-field contract, rates and who publishes what.
 
 pub mod command;
+pub mod layout;
 pub mod master;
 pub mod ports;
 pub mod status;

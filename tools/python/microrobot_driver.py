@@ -273,6 +273,10 @@ class DriverConfig:
     """What a driver needs from the resolved pipeline config and its robot file."""
 
     def __init__(self, path=None, instance=None):
+        info = os.environ.get("MICROROBOT_DRIVER_INFO")
+        if info and not path:
+            self._from_driver_info(info, instance)
+            return
         path = path or os.environ.get("MICROROBOT_CONFIG")
         raw = {}
         if path:
@@ -313,6 +317,41 @@ class DriverConfig:
         # A restart after a crash: the supervisor hands over the dead driver's last state
         # (MICROROBOT_RESUME_STATE, "q=..;qd=..;tau=..", SI). A simulated plant starts
         # there, as the physical arm has not moved; a hardware driver reads its encoders.
+        self.resume = parse_resume_state(os.environ.get("MICROROBOT_RESUME_STATE"), self.dof)
+        if self.resume is not None:
+            self.initial_q = list(self.resume["q"])
+            self.initial_qd = list(self.resume["qd"])
+
+    def _from_driver_info(self, path, instance):
+        """Everything from the supervisor's driver.toml (MICROROBOT_DRIVER_INFO): SI, any
+        robot description (DH, URDF, overlay)."""
+        try:
+            with open(path, "rb") as f:
+                raw = tomllib.load(f)
+            wd, hold = raw["watchdog"], raw["hold"]
+            self.instance = instance or raw["instance"]
+            self.rate_hz = float(raw["rate_hz"])
+            self.lockstep = bool(raw["lockstep"])
+            self.status_period_ms = float(raw["status_period_ms"])
+            self.stale_ms = float(wd["stale_ms"])
+            self.fault_ms = float(wd["fault_ms"])
+            self.safe_state = wd["safe_state"]
+            self.auto_resume = bool(wd["auto_resume"])
+            self.ramp_ms = float(wd["ramp_ms"])
+            self.hold_kp = float(hold["kp_per_s2"])
+            self.hold_kd = float(hold["kd_per_s"])
+            self.joints = raw["joints"]
+            self.dof = int(raw["dof"])
+            unit = {"revolute": ("nm", "rad"), "prismatic": ("n", "m")}
+            self.effort = [float(j["effort_" + unit[j["kind"]][0]]) for j in self.joints]
+            self.initial_q = [float(j["start_" + unit[j["kind"]][1]]) for j in self.joints]
+        except (OSError, tomllib.TOMLDecodeError, KeyError, TypeError, ValueError) as e:
+            raise SystemExit(f"driver: {path} (MICROROBOT_DRIVER_INFO): {type(e).__name__}: {e}")
+        if not INSTANCE_RE.match(self.instance):
+            raise SystemExit(f"driver: instance {self.instance!r}: must be 1..64 of [A-Za-z0-9_-]")
+        if len(self.joints) != self.dof:
+            raise SystemExit(f"driver: {path}: dof = {self.dof} but {len(self.joints)} [[joints]]")
+        self.initial_qd = [0.0] * self.dof
         self.resume = parse_resume_state(os.environ.get("MICROROBOT_RESUME_STATE"), self.dof)
         if self.resume is not None:
             self.initial_q = list(self.resume["q"])

@@ -3,6 +3,7 @@
 pub mod check;
 pub mod config_path;
 pub mod driver_check;
+pub mod driver_info;
 pub mod duration;
 pub mod eval_model;
 pub mod eval_trajectory;

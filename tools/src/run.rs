@@ -479,11 +479,17 @@ pub fn service_env(cfg: &PipelineConfig, resolved: &Path) -> Vec<(String, String
             microrobot_runtime::provenance::SUPERVISOR_ENV.to_string(),
             std::process::id().to_string(),
         ),
+        (
+            crate::driver_info::DRIVER_INFO_ENV.to_string(),
+            crate::driver_info::path_beside(resolved)
+                .display()
+                .to_string(),
+        ),
     ]
 }
 
-/// An external driver's command line with `{instance}`, `{config}`, `{rate_hz}` and
-/// `{run_dir}` substituted.
+/// An external driver's command line with `{instance}`, `{config}`, `{rate_hz}`,
+/// `{run_dir}` and `{driver_info}` substituted.
 pub fn driver_argv(
     command: &[String],
     cfg: &PipelineConfig,
@@ -497,6 +503,12 @@ pub fn driver_argv(
                 .replace("{config}", &resolved.display().to_string())
                 .replace("{rate_hz}", &cfg.rate_hz.to_string())
                 .replace("{run_dir}", &run_dir.display().to_string())
+                .replace(
+                    "{driver_info}",
+                    &crate::driver_info::path_beside(resolved)
+                        .display()
+                        .to_string(),
+                )
         })
         .collect()
 }
@@ -770,6 +782,11 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     let resolved = run_dir.join("pipeline.resolved.toml");
     instance::write_private(&resolved, cfg.to_toml_string().as_bytes())
         .map_err(fail(exit_code::FAILURE))?;
+    instance::write_private(
+        &crate::driver_info::path_beside(&resolved),
+        crate::driver_info::render(&cfg, &robot, &resolved).as_bytes(),
+    )
+    .map_err(fail(exit_code::FAILURE))?;
 
     let stop_flag = Arc::new(AtomicBool::new(false));
     {
