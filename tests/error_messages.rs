@@ -1,6 +1,7 @@
 //! Every error message of the CLI and the config loaders that a user meets, with the
 //! input that produces it and its exit code, so a change of wording shows here first.
-//! `{cfg}` stands for the config file's path, `{dir}` for the test's directory.
+//! `{cfg}` stands for the config file's path, `{dir}` for the test's directory, `{seed}`
+//! for the seed arm's robot file.
 
 mod common;
 
@@ -171,6 +172,25 @@ const CASES: &[Case] = &[
         code: JOB_FAILED,
         line: "error: 1 of 1 input line(s) could not be evaluated (their output lines say why)",
     },
+    // `robot urdf`: the robot file, and the output file.
+    Case {
+        config: None,
+        args: &["robot", "urdf", "{dir}/missing.toml"],
+        code: BAD_CONFIG,
+        line: "error: robot file {dir}/missing.toml: missing.toml: cannot read: No such file or directory (os error 2)",
+    },
+    Case {
+        config: None,
+        args: &[
+            "robot",
+            "urdf",
+            "{seed}",
+            "-o",
+            "{dir}/no-such-dir/arm.urdf",
+        ],
+        code: FAILURE,
+        line: "error: cannot write {dir}/no-such-dir/arm.urdf: No such file or directory (os error 2)",
+    },
 ];
 
 #[test]
@@ -191,7 +211,12 @@ fn every_error_message_is_the_one_listed() {
             .as_ref()
             .map(|p| p.to_str().expect("utf-8").to_string())
             .unwrap_or_default();
-        let fill = |s: &str| s.replace("{cfg}", &c).replace("{dir}", &d);
+        let seed = seed_arm().to_str().expect("utf-8").to_string();
+        let fill = |s: &str| {
+            s.replace("{cfg}", &c)
+                .replace("{dir}", &d)
+                .replace("{seed}", &seed)
+        };
         let args: Vec<String> = case.args.iter().map(|a| fill(a)).collect();
         let argv: Vec<&str> = args.iter().map(String::as_str).collect();
         // `eval trajectory` reads one bad line from stdin.

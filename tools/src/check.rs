@@ -180,6 +180,10 @@ pub fn check_pipeline(cfg: &PipelineConfig) -> Findings {
             .collect::<Vec<_>>()
             .join(", ")
     ));
+    if let Some(msg) = microrobot_planner::missing_limits_error(&robot) {
+        f.errors
+            .push(format!("robot file {}: {msg}", cfg.robot.display()));
+    }
     let start = start_position(&robot, cfg, &mut f);
     check_realtime(cfg, &mut f);
     let Some(path) = &cfg.program else {

@@ -11,6 +11,7 @@ pub mod exit;
 pub mod inspect;
 pub mod probe_chain;
 pub mod recording;
+pub mod robot_cmd;
 pub mod run;
 pub mod send;
 pub mod service;

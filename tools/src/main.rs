@@ -10,8 +10,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, replay};
 use microrobot_cli::{
-    check, driver_check, eval_model, eval_trajectory, inspect, probe_chain, run, send, service,
-    soak, study, teleop_report, teleop_source, top,
+    check, driver_check, eval_model, eval_trajectory, inspect, probe_chain, robot_cmd, run, send,
+    service, soak, study, teleop_report, teleop_source, top,
 };
 
 #[derive(Parser)]
@@ -70,6 +70,9 @@ enum Command {
     /// Evaluate a model or a trajectory: JSON lines in on stdin, JSON lines out on stdout.
     #[command(subcommand)]
     Eval(EvalCommand),
+    /// Convert a robot description (`robot urdf`: any robot file as URDF and its overlay).
+    #[command(subcommand)]
+    Robot(robot_cmd::RobotCommand),
     /// Run one pipeline service in this process (used by `microrobot run`).
     #[command(hide = true)]
     Service(service::ServiceArgs),
@@ -168,6 +171,7 @@ fn main() -> ExitCode {
         Command::Service(args) => return service::main(args),
         Command::Eval(EvalCommand::Model { robot, method }) => eval_model::run(&robot, method),
         Command::Eval(EvalCommand::Trajectory) => eval_trajectory::run(),
+        Command::Robot(cmd) => robot_cmd::main(cmd),
         Command::Completions { shell } => {
             let mut cmd = <Cli as clap::CommandFactory>::command();
             clap_complete::generate(shell, &mut cmd, "microrobot", &mut std::io::stdout());

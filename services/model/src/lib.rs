@@ -70,6 +70,7 @@ pub use robot::{
     RobotError,
 };
 pub use robot_file::RobotFileError;
+pub use robot_file::urdf_writer::{overlay_toml, to_urdf};
 
 /// Largest number of joints a [`Robot`] may have; fixes the size of every
 /// statically sized vector and matrix below.

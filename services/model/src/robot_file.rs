@@ -5,6 +5,7 @@
 //! element and its joint or link, `joint[panda_joint4].axis`).
 
 mod urdf;
+pub mod urdf_writer;
 
 use crate::MAX_JOINTS;
 use crate::math::Pose;

@@ -941,7 +941,24 @@ impl PlannerCore {
 
 /// Loads the robot file named by the config (a bad file is a config error).
 pub fn load_robot(cfg: &PipelineConfig) -> anyhow::Result<Robot> {
-    Robot::from_file(&cfg.robot).map_err(|e| BadConfig(format!("robot file: {e}")).into())
+    let robot = Robot::from_file(&cfg.robot).map_err(|e| BadConfig(format!("robot file: {e}")))?;
+    if let Some(msg) = missing_limits_error(&robot) {
+        return Err(BadConfig(format!("robot file {}: {msg}", cfg.robot.display())).into());
+    }
+    Ok(robot)
+}
+
+/// Why `robot` cannot be planned for: the rate limits its description lacks (a URDF
+/// gives no acceleration or jerk limits), named by the overlay keys that would give them.
+pub fn missing_limits_error(robot: &Robot) -> Option<String> {
+    let missing = robot.missing_limits();
+    (!missing.is_empty()).then(|| {
+        format!(
+            "the planner needs acceleration and jerk limits the robot description does not give; \
+             add them to the robot's overlay file: {}",
+            missing.join(", ")
+        )
+    })
 }
 
 /// The planner service (`microrobot service planner`).
