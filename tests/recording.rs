@@ -1,7 +1,8 @@
 //! Recording a lockstep run to MCAP and everything done with the file afterwards:
 //! read back by the `mcap` crate's reader (counts per topic, JSON matching the schemas),
 //! `export` (CSV rows), `plot` (PNGs), `replay` (torques bit for bit; an altered
-//! setpoint is reported).
+//! setpoint is reported); a recorder killed mid-run leaves a file that `export` reads up
+//! to its last complete chunk and `recover` finishes.
 
 mod common;
 
@@ -45,6 +46,7 @@ fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
     let bytes = std::fs::read(path).expect("read recording");
     let mut out: BTreeMap<String, Vec<Value>> = BTreeMap::new();
     let mut schema_fields: HashMap<String, BTreeSet<String>> = HashMap::new();
+    let mut offsets: Option<i128> = None;
     for m in mcap::MessageStream::new(&bytes).expect("MCAP header") {
         let m = m.expect("MCAP message");
         let topic = m.channel.topic.clone();
@@ -65,9 +67,57 @@ fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
         let mut k = BTreeSet::new();
         keys("", &v, &mut k);
         assert_eq!(&k, fields, "`{topic}` message fields vs its schema");
-        assert_eq!(m.log_time, m.publish_time);
+        // publish_time is the message's own CLOCK_MONOTONIC stamp; log_time the same
+        // instant on the wall clock: one offset for the whole file, the `clocks` one.
+        let stamp = v
+            .get("header")
+            .and_then(|h| h.get("stamp_ns"))
+            .or_else(|| v.get("stamp_ns"))
+            .and_then(Value::as_u64)
+            .expect("a stamp");
+        assert_eq!(
+            m.publish_time, stamp,
+            "`{topic}`: publish_time is the stamp"
+        );
+        let offset = i128::from(m.log_time) - i128::from(m.publish_time);
+        assert_eq!(
+            *offsets.get_or_insert(offset),
+            offset,
+            "one clock offset per file"
+        );
         out.entry(topic).or_default().push(v);
     }
+    let offset = offsets.expect("messages were recorded");
+    let wall_now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .expect("after 1970")
+        .as_nanos() as i128;
+    let mono_now = i128::from(microrobot_messages::monotonic_ns());
+    assert!(
+        (mono_now + offset - wall_now).abs() < 60_000_000_000,
+        "log times are within a minute of the wall clock"
+    );
+    // The offset is in the file's `clocks` metadata, and chunks are zstd-compressed.
+    let clocks: Vec<_> = mcap::read::LinearReader::new(&bytes)
+        .expect("MCAP")
+        .filter_map(|r| match r {
+            Ok(mcap::records::Record::Metadata(m)) if m.name == "clocks" => Some(m),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(clocks.len(), 1, "one `clocks` metadata record");
+    assert_eq!(
+        clocks[0].metadata["realtime_minus_monotonic_ns"],
+        offset.to_string()
+    );
+    let chunk_compression: BTreeSet<String> = mcap::read::LinearReader::new(&bytes)
+        .expect("MCAP")
+        .filter_map(|r| match r {
+            Ok(mcap::records::Record::Chunk { header, .. }) => Some(header.compression),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(chunk_compression, BTreeSet::from(["zstd".to_string()]));
     // The file is finished: summary and indexes present.
     let summary = mcap::Summary::read(&bytes)
         .expect("summary readable")
@@ -479,4 +529,114 @@ fn bad_recordings_are_refused_with_the_file_named() {
         "{}",
         missing.stderr
     );
+}
+
+/// A recorder killed with SIGKILL mid-run: `export` reads the file up to its last
+/// complete chunk (at most a second of messages lost) and says where it was cut;
+/// `recover` writes a finished, indexed copy with every message read.
+#[test]
+fn a_killed_recorder_leaves_a_file_export_reads_and_recover_finishes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("rec-kill");
+    let cfg = write_config(dir.path(), &inst, "", "");
+    let mcap_path = dir.path().join("killed.mcap");
+    let ready = dir.path().join("ready");
+    let rec = start(&[
+        "record",
+        "--instance",
+        &inst,
+        "--out",
+        mcap_path.to_str().expect("utf-8"),
+        "--ready-file",
+        ready.to_str().expect("utf-8"),
+    ]);
+    let t0 = std::time::Instant::now();
+    while !ready.exists() {
+        assert!(t0.elapsed().as_secs() < 60, "recorder not ready in 60 s");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let pipeline = start(&[
+        "run",
+        "--config",
+        cfg.to_str().expect("utf-8"),
+        "--no-program",
+        "--duration",
+        "6",
+        "--quiet",
+    ]);
+    // Well past the first flushed chunks (one per second of messages), then SIGKILL.
+    std::thread::sleep(std::time::Duration::from_secs(4));
+    rec.signal(libc::SIGKILL);
+    let _ = rec.finish(30.0);
+    let done = pipeline.finish(120.0);
+    assert_eq!(
+        done.code(),
+        Some(0),
+        "the pipeline runs on: {}",
+        done.stderr
+    );
+
+    let out = dir.path().join("csv");
+    let exported = run(
+        &[
+            "export",
+            mcap_path.to_str().expect("utf-8"),
+            "--out",
+            out.to_str().expect("utf-8"),
+        ],
+        60.0,
+    );
+    assert_eq!(exported.code(), Some(0), "{}", exported.stderr);
+    assert!(
+        exported.stderr.contains("the file ends early"),
+        "the cut is said: {}",
+        exported.stderr
+    );
+    let rows = |dir: &Path, t: &str| {
+        std::fs::read_to_string(dir.join(format!("{t}.csv")))
+            .expect("csv")
+            .lines()
+            .count()
+            - 1
+    };
+    let setpoints = rows(&out, "setpoint");
+    // The run held the arm for ~3 s before the kill at 1 kHz: at most the last second
+    // (the open chunk) is lost.
+    assert!(setpoints >= 1500, "{setpoints} setpoints before the kill");
+
+    let recovered = dir.path().join("recovered.mcap");
+    let r = run(
+        &[
+            "recover",
+            mcap_path.to_str().expect("utf-8"),
+            recovered.to_str().expect("utf-8"),
+        ],
+        60.0,
+    );
+    assert_eq!(r.code(), Some(0), "{}", r.stderr);
+    assert!(r.stderr.contains("ends early"), "{}", r.stderr);
+    // The copy is finished: summary, indexes, and the same messages.
+    let bytes = std::fs::read(&recovered).expect("recovered");
+    let summary = mcap::Summary::read(&bytes)
+        .expect("summary readable")
+        .expect("a finished file has a summary");
+    assert!(!summary.chunk_indexes.is_empty());
+    let n = mcap::MessageStream::new(&bytes)
+        .expect("MCAP")
+        .filter(|m| m.as_ref().is_ok_and(|m| m.channel.topic == "setpoint"))
+        .count();
+    assert_eq!(n, setpoints, "recover keeps every message export read");
+    let again = dir.path().join("csv2");
+    let e2 = run(
+        &[
+            "export",
+            recovered.to_str().expect("utf-8"),
+            "--out",
+            again.to_str().expect("utf-8"),
+        ],
+        60.0,
+    );
+    assert_eq!(e2.code(), Some(0), "{}", e2.stderr);
+    assert!(!e2.stderr.contains("ends early"), "{}", e2.stderr);
+    assert_eq!(rows(&again, "setpoint"), setpoints);
 }

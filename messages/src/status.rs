@@ -59,6 +59,17 @@ impl LifecycleState {
             _ => None,
         }
     }
+
+    /// Lower-case name, as in logs, summaries and exported recordings.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Unconfigured => "unconfigured",
+            Self::Inactive => "inactive",
+            Self::Active => "active",
+            Self::Fault => "fault",
+            Self::Finalized => "finalized",
+        }
+    }
 }
 
 /// Why a service refused an input (`ServiceStatus::last_command_refusal`,

@@ -69,6 +69,22 @@ pub mod setpoint_flags {
     pub const TELEOP_INPUT_REFUSED: u32 = 1 << 11;
     /// Teleop: the tool's Cartesian velocity or acceleration limit is active.
     pub const TELEOP_LIMITED: u32 = 1 << 12;
+    /// Every flag with its name, in bit order (for tools that print flags).
+    pub const NAMES: &[(u32, &str)] = &[
+        (MOVING, "MOVING"),
+        (STOPPING, "STOPPING"),
+        (ESTOP, "ESTOP"),
+        (HOLD_FOR_SAFE_STATE, "HOLD_FOR_SAFE_STATE"),
+        (PROGRAM_DONE, "PROGRAM_DONE"),
+        (TELEOP, "TELEOP"),
+        (TELEOP_CLUTCH_OPEN, "TELEOP_CLUTCH_OPEN"),
+        (TELEOP_MASTER_STALE, "TELEOP_MASTER_STALE"),
+        (TELEOP_WORKSPACE_EDGE, "TELEOP_WORKSPACE_EDGE"),
+        (TELEOP_SINGULARITY, "TELEOP_SINGULARITY"),
+        (TELEOP_FLIP_REFUSED, "TELEOP_FLIP_REFUSED"),
+        (TELEOP_INPUT_REFUSED, "TELEOP_INPUT_REFUSED"),
+        (TELEOP_LIMITED, "TELEOP_LIMITED"),
+    ];
 }
 
 /// Dynamics → actuator: the joint torques (forces for prismatic joints) to apply.
@@ -102,6 +118,13 @@ pub mod torque_flags {
     pub const FEEDBACK: u32 = 1 << 2;
     /// At least one joint's torque change was cut to the slew limit (`torque_slew_ms`).
     pub const SLEW_LIMITED: u32 = 1 << 3;
+    /// Every flag with its name, in bit order (for tools that print flags).
+    pub const NAMES: &[(u32, &str)] = &[
+        (CLAMPED, "CLAMPED"),
+        (STATE_STALE, "STATE_STALE"),
+        (FEEDBACK, "FEEDBACK"),
+        (SLEW_LIMITED, "SLEW_LIMITED"),
+    ];
 }
 
 /// Actuator → planner and dynamics: the measured joint state.
@@ -148,4 +171,13 @@ pub mod state_flags {
     /// missed plant periods were not replayed and it holds with its own law until a
     /// torque command computed from a state published after the stall arrives.
     pub const STALLED: u32 = 1 << 5;
+    /// Every flag with its name, in bit order (for tools that print flags).
+    pub const NAMES: &[(u32, &str)] = &[
+        (SAFE_STATE, "SAFE_STATE"),
+        (COMMAND_STALE, "COMMAND_STALE"),
+        (SATURATED, "SATURATED"),
+        (SLOPE_LIMITED, "SLOPE_LIMITED"),
+        (FINAL, "FINAL"),
+        (STALLED, "STALLED"),
+    ];
 }

@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # CI step: a lockstep run recorded by `microrobot record`, read back by Python's `mcap`
-# package (an MCAP reader independent of ours): every topic present, every message
-# JSON with its schema's required fields, setpoints and torques (+ reported gaps) == the run's cycles.
+# package (an MCAP reader independent of ours, pinned in recording-requirements.txt):
+# every topic present, every message JSON with its schema's required fields, setpoints
+# and torques (+ reported gaps) == the run's cycles; zstd chunks read through the indexed
+# reader; log times on the wall clock (within a minute of `date`), publish times the
+# messages' own monotonic stamps, the offset in the `clocks` metadata; the size per second.
 # Usage: bash tools/ci/recording-python.sh [path/to/microrobot]   (from the repo root)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -10,7 +13,7 @@ bin="${1:-target/release/microrobot}"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 python3 -m venv "$work/venv"
-"$work/venv/bin/pip" install --quiet 'mcap>=1.1,<2'
+"$work/venv/bin/pip" install --quiet -r tools/ci/recording-requirements.txt
 
 inst="ci-rec-$$"
 "$bin" record --instance "$inst" --out "$work/run.mcap" --until-finalized \
@@ -34,6 +37,28 @@ with open(sys.argv[1], "rb") as f:
         msg = json.loads(message.data)
         assert set(msg) == req, (channel.topic, set(msg) ^ req)
         counts[channel.topic] = counts.get(channel.topic, 0) + 1
+import time
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f)
+    summary = reader.get_summary()
+    assert summary is not None and summary.chunk_indexes, "a finished, indexed file"
+    assert {c.compression for c in summary.chunk_indexes} == {"zstd"}, summary.chunk_indexes
+    clocks = [m for m in reader.iter_metadata() if m.name == "clocks"]
+    assert len(clocks) == 1, clocks
+    offset = int(clocks[0].metadata["realtime_minus_monotonic_ns"])
+    now = time.time_ns()
+    n = 0
+    for schema, channel, message in reader.iter_messages():
+        stamp = json.loads(message.data)
+        stamp = stamp["header"]["stamp_ns"] if "header" in stamp else stamp["stamp_ns"]
+        assert message.publish_time == stamp, (channel.topic, message.publish_time, stamp)
+        assert message.log_time == stamp + offset, (channel.topic, message.log_time, stamp, offset)
+        assert abs(message.log_time - now) < 60e9, ("log time not within a minute of now", message.log_time, now)
+        n += 1
+rec = json.loads(open(sys.argv[3]).read().strip().splitlines()[-1])
+print(f"python mcap reader: {n} messages on the wall clock (offset {offset} ns); "
+      f"{rec['bytes']} bytes, {rec['bytes_per_s'] / 1e3:.1f} kB/s")
+assert rec["bytes"] > 0 and rec["bytes_per_s"] > 0, rec
 s = json.load(open(sys.argv[2]))
 gaps = json.loads(open(sys.argv[3]).read().strip().splitlines()[-1])["gaps"]  # reported losses
 print("python mcap reader:", counts, "run cycles:", s["cycles"])

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use microrobot_cli::recording::{export, plot, record, replay};
+use microrobot_cli::recording::{export, plot, record, recover, replay};
 use microrobot_cli::{
     check, driver_check, eval_model, eval_trajectory, inspect, probe_chain, robot_cmd, run, send,
     service, soak, study, teleop_report, teleop_source, top,
@@ -67,6 +67,9 @@ enum Command {
     Plot(plot::PlotArgs),
     /// Recompute a recording's torques with the dynamics law and check they are bit-identical.
     Replay(replay::ReplayArgs),
+    /// Write a finished, indexed copy of a recording that ended early (a recorder killed,
+    /// a full disk): everything up to its last complete chunk.
+    Recover(recover::RecoverArgs),
     /// Evaluate a model or a trajectory: JSON lines in on stdin, JSON lines out on stdout.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -168,6 +171,7 @@ fn main() -> ExitCode {
         Command::Export(args) => export::main(args),
         Command::Plot(args) => plot::main(args),
         Command::Replay(args) => replay::main(args),
+        Command::Recover(args) => recover::main(args),
         Command::Service(args) => return service::main(args),
         Command::Eval(EvalCommand::Model { robot, method }) => eval_model::run(&robot, method),
         Command::Eval(EvalCommand::Trajectory) => eval_trajectory::run(),

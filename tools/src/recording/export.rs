@@ -1,14 +1,18 @@
 //! `microrobot export FILE.mcap --out DIR`: one CSV per recorded topic.
 //!
 //! Columns: `log_time_ns`, then the message's fields flattened (`header.seq`, ...,
-//! `q_0`..`q_{dof-1}`); floats as recorded (shortest round-trip form). Malformed
-//! messages are skipped and counted per topic, not exported.
+//! `q_0`..`q_{dof-1}`); floats as recorded (shortest round-trip form); `u64::MAX` (the
+//! contract's "none") as an empty cell; `lifecycle_name` beside `lifecycle` and
+//! `flag_names` beside `flags`. Malformed messages are skipped and counted per topic, not
+//! exported. A file that ends early (a recorder killed, a full disk) is exported up to
+//! its last complete chunk, with a warning saying where it was cut.
 
 use std::collections::{BTreeMap, HashMap};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, bail};
+use microrobot_messages::{LifecycleState, setpoint_flags, state_flags, torque_flags};
 use serde_json::Value;
 
 use super::{Recording, TOPICS, flatten, setpoint_from, state_from, torque_from};
@@ -46,6 +50,56 @@ pub struct Exported {
 /// A message flattened: its position in the topic, log time and (column, value) cells.
 type Row = (usize, u64, Vec<(String, String)>);
 
+/// The flag names of `topic`'s `flags` field, if it has flags.
+fn flag_names(topic: &str) -> Option<&'static [(u32, &'static str)]> {
+    match topic {
+        "setpoint" => Some(setpoint_flags::NAMES),
+        "torque" => Some(torque_flags::NAMES),
+        "state" => Some(state_flags::NAMES),
+        _ => None,
+    }
+}
+
+/// `cells` as a reader wants them: `u64::MAX` (the contract's "none", e.g. a state's
+/// `torque_seq` before its first torque) as an empty cell, and beside `lifecycle` and
+/// `flags` their names (`lifecycle_name`: `active`, ...; `flag_names`: `MOVING|ESTOP`,
+/// empty for none, `0x...` for bits the contract does not name).
+fn readable_cells(topic: &str, cells: Vec<(String, String)>) -> Vec<(String, String)> {
+    let sentinel = u64::MAX.to_string();
+    let mut out = Vec::with_capacity(cells.len() + 2);
+    for (k, v) in cells {
+        let v = if v == sentinel { String::new() } else { v };
+        let named = match k.as_str() {
+            "lifecycle" => Some((
+                "lifecycle_name",
+                v.parse::<u32>()
+                    .ok()
+                    .and_then(LifecycleState::from_wire)
+                    .map_or_else(|| format!("unknown ({v})"), |l| l.name().to_string()),
+            )),
+            "flags" => flag_names(topic).map(|names| {
+                let bits = v.parse::<u32>().unwrap_or(0);
+                let mut parts: Vec<String> = names
+                    .iter()
+                    .filter(|(b, _)| bits & b != 0)
+                    .map(|(_, n)| n.to_string())
+                    .collect();
+                let known = names.iter().fold(0, |acc, (b, _)| acc | b);
+                if bits & !known != 0 {
+                    parts.push(format!("{:#x}", bits & !known));
+                }
+                ("flag_names", parts.join("|"))
+            }),
+            _ => None,
+        };
+        out.push((k, v));
+        if let Some((name, value)) = named {
+            out.push((name.to_string(), value));
+        }
+    }
+    out
+}
+
 /// Whether the typed reader of `topic` (for the streams that have one) takes `v`.
 fn readable(topic: &str, v: &Value) -> Result<()> {
     match topic {
@@ -76,7 +130,7 @@ pub fn export(file: &Path, dir: &Path) -> Result<Exported> {
             }
             let mut cells = Vec::new();
             flatten("", &m.value, &mut cells);
-            rows.push((m.index, m.log_time, cells));
+            rows.push((m.index, m.log_time, readable_cells(&topic, cells)));
         }
         let mut counts: HashMap<Vec<&str>, usize> = HashMap::new();
         for (_, _, cells) in &rows {

@@ -6,14 +6,22 @@
 //! decodes and plots). Each message is one JSON object with the payload's field names;
 //! arrays of the cyclic streams hold the `dof` active joints only, the status arrays all
 //! [`MAX_JOINTS`]. Floats are printed shortest-round-trip (they parse back bit for bit).
-//! `log_time` and `publish_time` are the message's own `CLOCK_MONOTONIC` stamp
-//! (`header.stamp_ns`, `stamp_ns`), in ns. The resolved pipeline config, when the
-//! recorder found it, is attached as `pipeline.resolved.toml`.
+//! `publish_time` is the message's own `CLOCK_MONOTONIC` stamp (`header.stamp_ns`,
+//! `stamp_ns`), in ns; `log_time` is the same instant on the wall clock
+//! (`CLOCK_REALTIME` ns: the stamp plus the offset between the clocks measured when the
+//! recorder started, kept in the metadata record `clocks`), so viewers show the real
+//! date. Chunks are zstd-compressed and closed at least once a second of message time,
+//! so a recorder killed with `kill -9` or stopped by a full disk loses at most its last
+//! second: the readers here read such a file up to its last complete chunk and say where
+//! it was cut, and `microrobot recover` writes a finished, indexed copy. The resolved
+//! pipeline config, when the recorder finds it, is attached as `pipeline.resolved.toml`
+//! (at the start when the pipeline is already up, else at the end).
 
 pub mod closed_loop;
 pub mod export;
 pub mod plot;
 pub mod record;
+pub mod recover;
 pub mod replay;
 
 use std::collections::BTreeMap;
@@ -289,6 +297,39 @@ pub fn state_from(v: &Value) -> Result<JointState> {
 
 // ---- reading ----
 
+/// What a reader says about a file that ends early: how much it read, up to when, and the
+/// record error where it stopped.
+fn cut_note(messages: usize, last_log_time: Option<u64>, e: &mcap::McapError) -> String {
+    let upto = last_log_time.map_or_else(String::new, |t| {
+        format!(" (the last at log time {:.3} s)", t as f64 * 1e-9)
+    });
+    format!(
+        "the file ends early (a recorder killed or a full disk?): read {messages} complete message(s){upto}, then: {e}; `microrobot recover IN OUT` writes a finished copy"
+    )
+}
+
+/// Every attachment of an MCAP file, read record by record (outside chunks), so a file
+/// without its summary section (a recorder killed) still gives those written before.
+fn attachments(bytes: &[u8]) -> BTreeMap<String, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let Ok(reader) = mcap::read::LinearReader::new_with_options(
+        bytes,
+        mcap::read::Options::IgnoreEndMagic.into(),
+    ) else {
+        return out;
+    };
+    for record in reader {
+        match record {
+            Ok(mcap::records::Record::Attachment { header, data, .. }) => {
+                out.insert(header.name, data.into_owned());
+            }
+            Ok(_) => {}
+            Err(_) => break,
+        }
+    }
+    out
+}
+
 /// One recorded message: its topic's JSON and the MCAP times.
 #[derive(Debug, Clone)]
 pub struct Recorded {
@@ -308,6 +349,9 @@ pub struct Recording {
     /// the file, why). Filled only by the readers that skip them
     /// ([`Recording::read_skipping_malformed`], [`Recording::parse_skipping`]).
     pub malformed: BTreeMap<String, Vec<(usize, String)>>,
+    /// Where the file ended early (a recorder killed, a full disk): the messages before
+    /// the first incomplete record were read, the rest is lost. `None` for a whole file.
+    pub cut: Option<String>,
 }
 
 impl Recording {
@@ -325,19 +369,24 @@ impl Recording {
 
     /// One line per topic with malformed messages: how many were skipped, and the first.
     pub fn malformed_report(&self, path: &Path) -> Vec<String> {
-        self.malformed
+        self.cut
             .iter()
-            .filter(|(_, v)| !v.is_empty())
-            .map(|(topic, v)| {
-                format!(
-                    "{}: skipped {} malformed `{topic}` message{} (first: message {}: {})",
-                    path.display(),
-                    v.len(),
-                    if v.len() == 1 { "" } else { "s" },
-                    v[0].0,
-                    v[0].1
-                )
-            })
+            .map(|c| format!("{}: {c}", path.display()))
+            .chain(
+                self.malformed
+                    .iter()
+                    .filter(|(_, v)| !v.is_empty())
+                    .map(|(topic, v)| {
+                        format!(
+                            "{}: skipped {} malformed `{topic}` message{} (first: message {}: {})",
+                            path.display(),
+                            v.len(),
+                            if v.len() == 1 { "" } else { "s" },
+                            v[0].0,
+                            v[0].1
+                        )
+                    }),
+            )
             .collect()
     }
 
@@ -348,8 +397,16 @@ impl Recording {
         let mut per_topic: BTreeMap<String, usize> = BTreeMap::new();
         let stream = mcap::MessageStream::new(&bytes)
             .with_context(|| format!("{}: not an MCAP file", what()))?;
+        let mut last_time = None;
         for (i, m) in stream.enumerate() {
-            let m = m.with_context(|| format!("{}: bad MCAP record (message {i})", what()))?;
+            let m = match m {
+                Ok(m) => m,
+                Err(e) => {
+                    rec.cut = Some(cut_note(i, last_time, &e));
+                    break;
+                }
+            };
+            last_time = Some(m.log_time);
             if m.channel.message_encoding != "json" {
                 bail!(
                     "{}: channel `{}` has message encoding `{}`, expected json",
@@ -386,13 +443,7 @@ impl Recording {
                     value,
                 });
         }
-        if let Ok(Some(summary)) = mcap::Summary::read(&bytes) {
-            for idx in &summary.attachment_indexes {
-                if let Ok(a) = mcap::read::attachment(&bytes, idx) {
-                    rec.attachments.insert(a.name.clone(), a.data.into_owned());
-                }
-            }
-        }
+        rec.attachments = attachments(&bytes);
         Ok(rec)
     }
 

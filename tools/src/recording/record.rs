@@ -22,7 +22,7 @@ use std::os::unix::fs::OpenOptionsExt as _;
 use std::path::PathBuf;
 use std::sync::mpsc;
 
-use anyhow::{Context as _, Result, anyhow, ensure};
+use anyhow::{Context as _, Result, anyhow, bail, ensure};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
@@ -78,6 +78,13 @@ pub struct RecordSummary {
     pub max_lag_us: f64,
     /// Whether the resolved pipeline config was attached.
     pub config_attached: bool,
+    /// `CLOCK_REALTIME` − `CLOCK_MONOTONIC` when the recorder started, ns: a message's
+    /// `log_time` is its stamp plus this (also in the file's `clocks` metadata).
+    pub realtime_minus_monotonic_ns: i64,
+    /// Size of the finished file, bytes.
+    pub bytes: u64,
+    /// `bytes` over the recording's duration (zstd-compressed chunks).
+    pub bytes_per_s: f64,
 }
 
 /// One received payload (the status boxed: it is rare and several times larger than
@@ -205,12 +212,54 @@ fn nice_this_thread(inc: i32) {
     }
 }
 
+/// Longest span of message time in one chunk: a chunk is closed (and the file flushed)
+/// once its messages span this much, so a killed recorder loses at most this much.
+const CHUNK_SPAN_NS: u64 = 1_000_000_000;
+
 struct Writer {
     mcap: mcap::Writer<BufWriter<File>>,
     channels: [u16; 5],
     sequence: [u32; 5],
     last_seq: [HashMap<u128, u64>; 5],
     summary: RecordSummary,
+    /// Stamp of the first message of the open chunk.
+    chunk_start_ns: Option<u64>,
+}
+
+/// `CLOCK_REALTIME` − `CLOCK_MONOTONIC` in ns, read as a tight pair (the monotonic
+/// read between two realtime reads; the pair with the smallest gap of five).
+fn clock_offset_ns() -> i64 {
+    let realtime = || {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as i64)
+    };
+    let mut best: Option<(i64, i64)> = None;
+    for _ in 0..5 {
+        let a = realtime();
+        let m = monotonic_ns() as i64;
+        let b = realtime();
+        let gap = b - a;
+        let offset = a + gap / 2 - m;
+        if best.is_none_or(|(g, _)| gap < g) {
+            best = Some((gap, offset));
+        }
+    }
+    best.map_or(0, |(_, o)| o)
+}
+
+/// The resolved config of `instance`'s run, from this user's private run directory,
+/// never through a symlink; `None` when there is none (yet).
+fn run_config(instance: &str) -> Option<Vec<u8>> {
+    let p = crate::supervisor::instance::run_file(instance, CONFIG_ATTACHMENT).ok()?;
+    let mut f = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
+        .open(p)
+        .ok()?;
+    let mut data = Vec::new();
+    std::io::Read::read_to_end(&mut f, &mut data).ok()?;
+    Some(data)
 }
 
 impl Writer {
@@ -219,7 +268,7 @@ impl Writer {
         let file =
             File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
         let mut mcap = mcap::WriteOptions::new()
-            .compression(None)
+            .compression(Some(mcap::Compression::Zstd))
             .profile("")
             .library(concat!("microrobot ", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::with_capacity(1 << 20, file))
@@ -231,16 +280,51 @@ impl Writer {
             let (name, schema) = super::schema(topic)?;
             let schema_id = mcap
                 .add_schema(name, "jsonschema", schema.to_string().as_bytes())
-                .context("MCAP schema")?;
+                .with_context(|| format!("cannot write {}", path.display()))?;
             channels[i] = mcap
                 .add_channel(schema_id, topic, "json", &meta)
-                .context("MCAP channel")?;
+                .with_context(|| format!("cannot write {}", path.display()))?;
         }
+        let offset = clock_offset_ns();
+        let clocks = BTreeMap::from([
+            (
+                "realtime_minus_monotonic_ns".to_string(),
+                offset.to_string(),
+            ),
+            (
+                "log_time".to_string(),
+                "CLOCK_REALTIME ns: the message's CLOCK_MONOTONIC stamp + realtime_minus_monotonic_ns".to_string(),
+            ),
+            (
+                "publish_time".to_string(),
+                "CLOCK_MONOTONIC ns: the message's own stamp (header.stamp_ns or stamp_ns)".to_string(),
+            ),
+        ]);
+        mcap.write_metadata(&mcap::records::Metadata {
+            name: "clocks".to_string(),
+            metadata: clocks,
+        })
+        .with_context(|| format!("cannot write {}", path.display()))?;
         let mut summary = RecordSummary {
             file: path.display().to_string(),
             instance: args.instance.clone(),
+            realtime_minus_monotonic_ns: offset,
             ..Default::default()
         };
+        // The run's config now if the pipeline is up (so a killed recorder keeps it),
+        // else at the end.
+        if let Some(data) = run_config(&args.instance) {
+            let now = (monotonic_ns() as i64 + offset).max(0) as u64;
+            mcap.attach(&mcap::Attachment {
+                log_time: now,
+                create_time: now,
+                name: CONFIG_ATTACHMENT.to_string(),
+                media_type: "application/toml".to_string(),
+                data: data.into(),
+            })
+            .with_context(|| format!("cannot write {}", path.display()))?;
+            summary.config_attached = true;
+        }
         for t in TOPICS {
             summary.messages.insert(t.to_string(), 0);
             summary.gaps.insert(t.to_string(), 0);
@@ -252,6 +336,7 @@ impl Writer {
             sequence: [0; 5],
             last_seq: Default::default(),
             summary,
+            chunk_start_ns: None,
         })
     }
 
@@ -275,37 +360,42 @@ impl Writer {
         self.summary.max_lag_us = self.summary.max_lag_us.max(lag_us);
         let data = serde_json::to_vec(&r.payload.json()).context("JSON encoding")?;
         self.sequence[t] = self.sequence[t].wrapping_add(1);
+        let wall = (stamp as i128 + self.summary.realtime_minus_monotonic_ns as i128)
+            .clamp(0, u64::MAX as i128) as u64;
         self.mcap
             .write_to_known_channel(
                 &mcap::records::MessageHeader {
                     channel_id: self.channels[t],
                     sequence: self.sequence[t],
-                    log_time: stamp,
+                    log_time: wall,
                     publish_time: stamp,
                 },
                 &data,
             )
             .with_context(|| format!("cannot write to {}", self.summary.file))?;
+        match self.chunk_start_ns {
+            None => self.chunk_start_ns = Some(stamp),
+            Some(t0) if stamp.saturating_sub(t0) >= CHUNK_SPAN_NS => {
+                self.mcap
+                    .flush()
+                    .with_context(|| format!("cannot write to {}", self.summary.file))?;
+                self.chunk_start_ns = None;
+            }
+            Some(_) => {}
+        }
         *self.summary.messages.entry(TOPICS[t].into()).or_default() += 1;
         Ok(())
     }
 
     fn finish(mut self, instance: &str) -> Result<RecordSummary> {
-        // Only from this user's private run directory, never through a symlink.
-        let data = crate::supervisor::instance::run_file(instance, CONFIG_ATTACHMENT)
-            .ok()
-            .and_then(|p| {
-                let mut f = std::fs::OpenOptions::new()
-                    .read(true)
-                    .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-                    .open(p)
-                    .ok()?;
-                let mut data = Vec::new();
-                std::io::Read::read_to_end(&mut f, &mut data).ok()?;
-                Some(data)
-            });
+        let data = if self.summary.config_attached {
+            None
+        } else {
+            run_config(instance)
+        };
         if let Some(data) = data {
-            let now = monotonic_ns();
+            let now =
+                (monotonic_ns() as i64 + self.summary.realtime_minus_monotonic_ns).max(0) as u64;
             self.mcap
                 .attach(&mcap::Attachment {
                     log_time: now,
@@ -324,6 +414,7 @@ impl Writer {
         inner
             .flush()
             .with_context(|| format!("cannot write {}", self.summary.file))?;
+        self.summary.bytes = inner.get_ref().metadata().map_or(0, |m| m.len());
         Ok(self.summary)
     }
 }
@@ -338,7 +429,8 @@ pub fn main(args: RecordArgs) -> Result<()> {
         );
     }
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
-    let shutdown = Shutdown::new().context("cannot create the shutdown eventfd")?;
+    let shutdown =
+        std::sync::Arc::new(Shutdown::new().context("cannot create the shutdown eventfd")?);
     shutdown
         .install_signal_handler()
         .context("cannot install the SIGINT/SIGTERM handler")?;
@@ -374,11 +466,12 @@ pub fn main(args: RecordArgs) -> Result<()> {
         .attach_notification(&timer)
         .map_err(|e| anyhow!("waitset: {e:?}"))?;
     let _g_stop = ws
-        .attach_notification(&shutdown)
+        .attach_notification(&*shutdown)
         .map_err(|e| anyhow!("waitset: {e:?}"))?;
 
     let (tx, rx) = mpsc::channel::<Received>();
     let instance = args.instance.clone();
+    let stop = shutdown.clone();
     let writer_thread = std::thread::Builder::new()
         .name("mcap-writer".into())
         .spawn(move || -> Result<RecordSummary> {
@@ -389,11 +482,16 @@ pub fn main(args: RecordArgs) -> Result<()> {
                 if first_error.is_none()
                     && let Err(e) = w.write(&r)
                 {
+                    // Said at once (a full disk), and the recorder stops: what it
+                    // wrote up to its last flushed chunk stays readable.
+                    eprintln!("error: {e:#}; the recorder stops");
+                    stop.request();
                     first_error = Some(e);
                 }
             }
-            if let Some(e) = first_error {
-                return Err(e);
+            if first_error.is_some() {
+                // Said when it happened; the file holds every chunk flushed before it.
+                bail!("the recording stopped at that write error");
             }
             w.finish(&instance)
         })
@@ -480,13 +578,17 @@ pub fn main(args: RecordArgs) -> Result<()> {
     result?;
     let mut summary = written?;
     summary.duration_s = monotonic_ns().saturating_sub(start) as f64 / 1e9;
+    if summary.duration_s > 0.0 {
+        summary.bytes_per_s = summary.bytes as f64 / summary.duration_s;
+    }
     let gaps: u64 = summary.gaps.values().sum();
     let before: u64 = summary.before_first.values().sum();
     eprintln!(
-        "recorded {} messages to {} in {:.1} s ({} lost to sequence gaps, {} sent before the first recorded)",
+        "recorded {} messages to {} in {:.1} s, {:.1} kB/s ({} lost to sequence gaps, {} sent before the first recorded)",
         summary.messages.values().sum::<u64>(),
         summary.file,
         summary.duration_s,
+        summary.bytes_per_s / 1e3,
         gaps,
         before
     );

@@ -106,6 +106,12 @@ fn describe_diff(sp: &JointSetpoint, rec: &TorqueCommand, got: &TorqueCommand) -
 pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
     let file = &args.file;
     let rec = Recording::read(file)?;
+    if let Some(cut) = &rec.cut {
+        eprintln!(
+            "warning: {}: {cut}; replaying what was read",
+            file.display()
+        );
+    }
     let mut setpoints = rec.parse(file, "setpoint", setpoint_from)?;
     let torques = rec.parse(file, "torque", torque_from)?;
     let states = rec.parse(file, "state", state_from)?;
@@ -206,6 +212,12 @@ pub struct ClosedLoopReport {
 pub fn replay_closed_loop(args: &ReplayArgs) -> Result<ClosedLoopReport> {
     let file = &args.file;
     let rec = Recording::read(file)?;
+    if let Some(cut) = &rec.cut {
+        eprintln!(
+            "warning: {}: {cut}; replaying what was read",
+            file.display()
+        );
+    }
     let by_seq = |v: Vec<(u64, Vec<(String, u64)>)>| v.into_iter().collect::<HashMap<_, _>>();
     let setpoints = rec.parse(file, "setpoint", setpoint_from)?;
     let torques = rec.parse(file, "torque", torque_from)?;
