@@ -47,6 +47,7 @@ fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
     let mut out: BTreeMap<String, Vec<Value>> = BTreeMap::new();
     let mut schema_fields: HashMap<String, BTreeSet<String>> = HashMap::new();
     let mut offsets: Option<i128> = None;
+    let mut stamps: BTreeMap<String, Vec<u64>> = BTreeMap::new();
     for m in mcap::MessageStream::new(&bytes).expect("MCAP header") {
         let m = m.expect("MCAP message");
         let topic = m.channel.topic.clone();
@@ -67,18 +68,37 @@ fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
         let mut k = BTreeSet::new();
         keys("", &v, &mut k);
         assert_eq!(&k, fields, "`{topic}` message fields vs its schema");
-        // publish_time is the message's own CLOCK_MONOTONIC stamp; log_time the same
+        // publish_time is the message's own CLOCK_MONOTONIC stamp (for the derived viewer
+        // channels, the stamp of the message they derive from); log_time the same
         // instant on the wall clock: one offset for the whole file, the `clocks` one.
-        let stamp = v
+        if let Some(stamp) = v
             .get("header")
             .and_then(|h| h.get("stamp_ns"))
             .or_else(|| v.get("stamp_ns"))
             .and_then(Value::as_u64)
-            .expect("a stamp");
-        assert_eq!(
-            m.publish_time, stamp,
-            "`{topic}`: publish_time is the stamp"
-        );
+        {
+            assert_eq!(
+                m.publish_time, stamp,
+                "`{topic}`: publish_time is the stamp"
+            );
+        } else {
+            assert!(
+                ["transforms", "joints"].contains(&topic.as_str()),
+                "{topic}"
+            );
+            let t = if topic == "transforms" {
+                &v["transforms"][0]["timestamp"]
+            } else {
+                &v["timestamp"]
+            };
+            let wall =
+                t["sec"].as_u64().expect("sec") * 1_000_000_000 + t["nsec"].as_u64().expect("nsec");
+            assert_eq!(wall, m.log_time, "`{topic}`: its timestamp is its log time");
+            stamps
+                .entry(topic.clone())
+                .or_default()
+                .push(m.publish_time);
+        }
         let offset = i128::from(m.log_time) - i128::from(m.publish_time);
         assert_eq!(
             *offsets.get_or_insert(offset),
@@ -118,6 +138,13 @@ fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
         })
         .collect();
     assert_eq!(chunk_compression, BTreeSet::from(["zstd".to_string()]));
+    // The viewer channels: the publish time of a derived message is the stamp of the
+    // state (or setpoint) it was derived from; kept under `_stamps.<topic>`.
+    for (topic, v) in stamps {
+        out.entry(format!("_stamps.{topic}"))
+            .or_default()
+            .extend(v.into_iter().map(Value::from));
+    }
     // The file is finished: summary and indexes present.
     let summary = mcap::Summary::read(&bytes)
         .expect("summary readable")
@@ -285,6 +312,39 @@ fn lockstep_run_recorded_exported_plotted_and_replayed_bit_for_bit() {
         assert!(count(t) > 0, "no `{t}` messages: {report}");
         assert_eq!(report["messages"][t], count(t), "{t}: {report}");
     }
+    // Foxglove's transforms: the frames of the model's forward kinematics of the
+    // recorded states (at 100 Hz), the tool among them.
+    let robot = microrobot_model::Robot::from_file(&seed_arm()).expect("seed arm");
+    let mut data = microrobot_model::ModelData::new(&robot);
+    let states_by_stamp: HashMap<u64, &Value> = topics["state"]
+        .iter()
+        .map(|v| (v["header"]["stamp_ns"].as_u64().expect("stamp"), v))
+        .collect();
+    let tf_stamps = &topics["_stamps.transforms"];
+    let mut checked = 0;
+    for (tf, stamp) in topics["transforms"].iter().zip(tf_stamps) {
+        let list = tf["transforms"].as_array().expect("transforms");
+        let Some(tool) = list.iter().find(|t| t["child_frame_id"] == "tool") else {
+            continue; // the commanded frames, under cmd/
+        };
+        let state = states_by_stamp[&stamp.as_u64().expect("stamp")];
+        let mut q = microrobot_model::JointVector::zeros();
+        for (i, x) in state["q"].as_array().expect("q").iter().enumerate() {
+            q[i] = x.as_f64().expect("q_i");
+        }
+        let want = microrobot_model::tool_pose(&robot, &mut data, &q);
+        for (axis, k) in ["x", "y", "z"].iter().enumerate() {
+            let got = tool["translation"][k].as_f64().expect("number");
+            assert!((got - want.translation[axis]).abs() < 1e-12, "tool {k}");
+        }
+        assert_eq!(list.len(), 7, "six joint frames and the tool");
+        checked += 1;
+    }
+    assert!(
+        checked > 10,
+        "transforms recorded from the states: {checked}"
+    );
+    assert!(count("joints") > 10, "joints recorded");
     let planner = s["cycles"]["planner"].as_u64().expect("planner cycles");
     let dynamics = s["cycles"]["dynamics"].as_u64().expect("dynamics cycles");
     assert!(planner > 100, "a 2 s lockstep run does many cycles: {s}");

@@ -48,13 +48,23 @@ with open(sys.argv[1], "rb") as f:
     offset = int(clocks[0].metadata["realtime_minus_monotonic_ns"])
     now = time.time_ns()
     n = 0
+    names = {}
     for schema, channel, message in reader.iter_messages():
-        stamp = json.loads(message.data)
-        stamp = stamp["header"]["stamp_ns"] if "header" in stamp else stamp["stamp_ns"]
+        names[channel.topic] = schema.name
+        msg = json.loads(message.data)
+        if channel.topic in ("transforms", "joints"):
+            # Derived for viewers: stamped with the state or setpoint they come from.
+            t = msg["transforms"][0]["timestamp"] if channel.topic == "transforms" else msg["timestamp"]
+            assert t["sec"] * 10**9 + t["nsec"] == message.log_time, (channel.topic, t)
+            stamp = message.publish_time
+        else:
+            stamp = msg["header"]["stamp_ns"] if "header" in msg else msg["stamp_ns"]
         assert message.publish_time == stamp, (channel.topic, message.publish_time, stamp)
         assert message.log_time == stamp + offset, (channel.topic, message.log_time, stamp, offset)
         assert abs(message.log_time - now) < 60e9, ("log time not within a minute of now", message.log_time, now)
         n += 1
+assert names["transforms"] == "foxglove.FrameTransforms", names
+assert names["joints"] == "microrobot.JointStates", names
 rec = json.loads(open(sys.argv[3]).read().strip().splitlines()[-1])
 print(f"python mcap reader: {n} messages on the wall clock (offset {offset} ns); "
       f"{rec['bytes']} bytes, {rec['bytes_per_s'] / 1e3:.1f} kB/s")

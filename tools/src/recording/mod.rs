@@ -23,6 +23,7 @@ pub mod plot;
 pub mod record;
 pub mod recover;
 pub mod replay;
+pub mod viewer;
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -414,6 +415,10 @@ impl Recording {
                     m.channel.topic,
                     m.channel.message_encoding
                 );
+            }
+            // The viewer channels are derived from the streams: nothing to read back.
+            if viewer::DERIVED_TOPICS.contains(&m.channel.topic.as_str()) {
+                continue;
             }
             let position = per_topic.entry(m.channel.topic.clone()).or_default();
             let index = *position;

@@ -32,6 +32,7 @@ use microrobot_messages::{
 };
 use microrobot_runtime::{Shutdown, TimerFd, waitset};
 use serde::Serialize;
+use serde_json::Value;
 
 use super::{CONFIG_ATTACHMENT, TOPICS};
 
@@ -56,7 +57,16 @@ pub struct RecordArgs {
     /// SCHED_FIFO priority of the draining thread (0: normal scheduling).
     #[arg(long, default_value_t = 10, value_name = "PRIO")]
     pub rt_priority: i32,
+    /// Derive the viewer channels (`transforms`, `joints`) from every state and setpoint
+    /// instead of at 100 Hz.
+    #[arg(long)]
+    pub full_rate: bool,
 }
+
+/// Period of the derived viewer channels by default (100 Hz).
+const VIEWER_PERIOD_NS: u64 = 10_000_000;
+/// How often the recorder looks for the run's config (the robot) until it has it.
+const VIEWER_RETRY_NS: u64 = 1_000_000_000;
 
 /// What the recorder reports at the end (one JSON line on stdout).
 #[derive(Debug, Clone, Default, Serialize)]
@@ -224,6 +234,21 @@ struct Writer {
     summary: RecordSummary,
     /// Stamp of the first message of the open chunk.
     chunk_start_ns: Option<u64>,
+    /// The viewer channels: ids (`transforms`, `joints`), MCAP sequence numbers, the
+    /// run's robot (once its config is found), and when each was last derived.
+    derived: Derived,
+}
+
+struct Derived {
+    channels: [u16; 2],
+    sequence: [u32; 2],
+    viewer: Option<super::viewer::Viewer>,
+    /// Stamp of the last look for the run's config.
+    looked_ns: Option<u64>,
+    period_ns: u64,
+    last_state_ns: Option<u64>,
+    last_setpoint_ns: Option<u64>,
+    instance: String,
 }
 
 /// `CLOCK_REALTIME` − `CLOCK_MONOTONIC` in ns, read as a tight pair (the monotonic
@@ -285,6 +310,15 @@ impl Writer {
                 .add_channel(schema_id, topic, "json", &meta)
                 .with_context(|| format!("cannot write {}", path.display()))?;
         }
+        let mut derived_channels = [0u16; 2];
+        for (i, (topic, name, schema)) in super::viewer::channels().into_iter().enumerate() {
+            let schema_id = mcap
+                .add_schema(name, "jsonschema", schema.to_string().as_bytes())
+                .with_context(|| format!("cannot write {}", path.display()))?;
+            derived_channels[i] = mcap
+                .add_channel(schema_id, topic, "json", &meta)
+                .with_context(|| format!("cannot write {}", path.display()))?;
+        }
         let offset = clock_offset_ns();
         let clocks = BTreeMap::from([
             (
@@ -337,6 +371,16 @@ impl Writer {
             last_seq: Default::default(),
             summary,
             chunk_start_ns: None,
+            derived: Derived {
+                channels: derived_channels,
+                sequence: [0; 2],
+                viewer: None,
+                looked_ns: None,
+                period_ns: if args.full_rate { 0 } else { VIEWER_PERIOD_NS },
+                last_state_ns: None,
+                last_setpoint_ns: None,
+                instance: args.instance.clone(),
+            },
         })
     }
 
@@ -373,6 +417,7 @@ impl Writer {
                 &data,
             )
             .with_context(|| format!("cannot write to {}", self.summary.file))?;
+        self.derive(&r.payload, stamp, wall)?;
         match self.chunk_start_ns {
             None => self.chunk_start_ns = Some(stamp),
             Some(t0) if stamp.saturating_sub(t0) >= CHUNK_SPAN_NS => {
@@ -384,6 +429,68 @@ impl Writer {
             Some(_) => {}
         }
         *self.summary.messages.entry(TOPICS[t].into()).or_default() += 1;
+        Ok(())
+    }
+
+    /// Writes the viewer channels a state or setpoint is due for (see
+    /// [`super::viewer`]); nothing until the run's config (the robot) is found.
+    fn derive(&mut self, payload: &Payload, stamp: u64, wall: u64) -> Result<()> {
+        let d = &mut self.derived;
+        let due = |last: Option<u64>| last.is_none_or(|t| stamp.saturating_sub(t) >= d.period_ns);
+        let wanted = match payload {
+            Payload::State(_) => due(d.last_state_ns),
+            Payload::Setpoint(_) => due(d.last_setpoint_ns),
+            _ => false,
+        };
+        if !wanted {
+            return Ok(());
+        }
+        if d.viewer.is_none()
+            && d.looked_ns
+                .is_none_or(|t| stamp.saturating_sub(t) >= VIEWER_RETRY_NS)
+        {
+            d.looked_ns = Some(stamp);
+            if let Some(text) = run_config(&d.instance) {
+                let text = String::from_utf8_lossy(&text).into_owned();
+                match super::viewer::Viewer::from_config_text(&text, CONFIG_ATTACHMENT) {
+                    Ok(v) => d.viewer = Some(v),
+                    Err(e) => eprintln!("warning: no transforms: {e:#}"),
+                }
+            }
+        }
+        let Some(viewer) = d.viewer.as_mut() else {
+            return Ok(());
+        };
+        let mut out: Vec<(usize, Value)> = Vec::new();
+        match payload {
+            Payload::State(m) => {
+                d.last_state_ns = Some(stamp);
+                out.extend(viewer.state_transforms(m, wall).map(|v| (0, v)));
+                out.extend(viewer.joints(m, wall).map(|v| (1, v)));
+            }
+            Payload::Setpoint(m) => {
+                d.last_setpoint_ns = Some(stamp);
+                out.extend(viewer.setpoint_transforms(m, wall).map(|v| (0, v)));
+            }
+            _ => {}
+        }
+        for (i, v) in out {
+            let data = serde_json::to_vec(&v).context("JSON encoding")?;
+            d.sequence[i] = d.sequence[i].wrapping_add(1);
+            self.mcap
+                .write_to_known_channel(
+                    &mcap::records::MessageHeader {
+                        channel_id: d.channels[i],
+                        sequence: d.sequence[i],
+                        log_time: wall,
+                        publish_time: stamp,
+                    },
+                    &data,
+                )
+                .with_context(|| format!("cannot write to {}", self.summary.file))?;
+            let topic = super::viewer::DERIVED_TOPICS[i];
+            *self.summary.messages.entry(topic.into()).or_default() += 1;
+        }
         Ok(())
     }
 
@@ -623,6 +730,7 @@ mod tests {
             ready_file: None,
             until_finalized: false,
             rt_priority: 0,
+            full_rate: false,
         })
         .expect("writer")
     }
