@@ -31,6 +31,7 @@ use microrobot_messages::{
 };
 use microrobot_model::{JointVector, ModelData, Robot, mass_matrix, nonlinear_effects, rnea};
 use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::provenance::{Origin, Provenance};
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::{
     JointBounds, Refusal, SeqTracker, check_fresh, check_setpoint, check_state,
@@ -155,7 +156,22 @@ impl DynamicsCore {
         publisher: u128,
         now_ns: u64,
     ) -> Result<(), Refusal> {
+        self.accept_state_from(msg, publisher, now_ns, || true)
+    }
+
+    /// [`Self::accept_state`], where a state that would take the stream over (its owner
+    /// silent for `stale_ms`) is taken only if `from_pipeline()` says the pipeline's supervisor started its
+    /// process ([`microrobot_runtime::provenance`]); another's is refused as an outsider's.
+    pub fn accept_state_from(
+        &mut self,
+        msg: &JointState,
+        publisher: u128,
+        now_ns: u64,
+        from_pipeline: impl FnOnce() -> bool,
+    ) -> Result<(), Refusal> {
         let r = check_state(msg, self.dof)
+            .and_then(|()| self.st_seq.takes_over(publisher, now_ns))
+            .and_then(|takes_over| outsider(takes_over, from_pipeline))
             .and_then(|()| self.st_seq.accept(publisher, msg.header.seq, now_ns));
         match r {
             Ok(()) => {
@@ -195,6 +211,19 @@ impl DynamicsCore {
         publisher: u128,
         now_ns: u64,
     ) -> Result<TorqueCommand, Refusal> {
+        self.compute_from(sp, publisher, now_ns, || true)
+    }
+
+    /// [`Self::compute`], where a setpoint that would take the stream over (its owner
+    /// silent for `stale_ms`) is taken only if `from_pipeline()` says the pipeline's supervisor started its
+    /// process; another's is refused as an outsider's and gives no torque.
+    pub fn compute_from(
+        &mut self,
+        sp: &JointSetpoint,
+        publisher: u128,
+        now_ns: u64,
+        from_pipeline: impl FnOnce() -> bool,
+    ) -> Result<TorqueCommand, Refusal> {
         let r = check_setpoint(sp, self.dof, &self.bounds)
             .and_then(|()| {
                 if self.lockstep {
@@ -203,6 +232,8 @@ impl DynamicsCore {
                     check_fresh(sp.header.stamp_ns, now_ns, self.stale_ns)
                 }
             })
+            .and_then(|()| self.sp_seq.takes_over(publisher, now_ns))
+            .and_then(|takes_over| outsider(takes_over, from_pipeline))
             .and_then(|()| self.sp_seq.accept(publisher, sp.header.seq, now_ns));
         if let Err(e) = r {
             self.counters.refused += 1;
@@ -327,6 +358,18 @@ impl DynamicsCore {
     }
 }
 
+/// `Err(Outsider)` for a message that would take a stream over (its owner silent for
+/// `stale_ms`) from a process the pipeline's supervisor did not start (`from_pipeline()`
+/// is asked only then); while the owner is live, any other publisher is refused as a
+/// second publisher before this.
+fn outsider(takes_over: bool, from_pipeline: impl FnOnce() -> bool) -> Result<(), Refusal> {
+    if takes_over && !from_pipeline() {
+        Err(Refusal::Outsider)
+    } else {
+        Ok(())
+    }
+}
+
 /// The dynamics service (`microrobot service dynamics`).
 pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let robot = microrobot_model::Robot::from_file(&cfg.robot)
@@ -335,7 +378,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let node = open_node(inst, ServiceRole::Dynamics)?;
     let err = |what: &'static str| move |e: &dyn std::fmt::Debug| anyhow::anyhow!("{what}: {e:?}");
 
-    let sp_sub = open_publish_subscribe::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?
+    let sp_svc = open_publish_subscribe::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?;
+    let sp_sub = sp_svc
         .subscriber_builder()
         .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
         .history_request(0)
@@ -345,12 +389,15 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .listener_builder()
         .create()
         .map_err(|e| err("setpoint listener")(&e))?;
-    let st_sub = open_publish_subscribe::<JointState>(&node, inst, ServiceKind::State)?
+    let st_svc = open_publish_subscribe::<JointState>(&node, inst, ServiceKind::State)?;
+    let st_sub = st_svc
         .subscriber_builder()
         .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
         .history_request(1)
         .create()
         .map_err(|e| err("state subscriber")(&e))?;
+    // Under a supervisor, a stream is taken over only by the supervisor's own processes.
+    let mut provenance = Provenance::from_env();
     let tq_pub = open_publish_subscribe::<TorqueCommand>(&node, inst, ServiceKind::Torque)?
         .publisher_builder()
         .create()
@@ -413,7 +460,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
-                let _ = core.accept_state(&msg, publisher, monotonic_ns());
+                let _ = core.accept_state_from(&msg, publisher, monotonic_ns(), || {
+                    provenance.check(&st_svc, publisher) == Origin::Pipeline
+                });
             }
             // Once a stop is asked for, nothing new is computed (a torque from a state
             // the shutdown cut off would differ from run to run).
@@ -440,7 +489,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                                 let m = *s;
                                 let p = s.header().publisher_id().value();
                                 drop(s);
-                                let _ = core.accept_state(&m, p, monotonic_ns());
+                                let _ = core.accept_state_from(&m, p, monotonic_ns(), || {
+                                    provenance.check(&st_svc, p) == Origin::Pipeline
+                                });
                             }
                             _ => std::thread::yield_now(),
                         }
@@ -451,7 +502,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 }
                 let now = monotonic_ns();
                 last_setpoint_ns = now;
-                if let Ok(mut cmd) = core.compute(&msg, publisher, now) {
+                let taken = core.compute_from(&msg, publisher, now, || {
+                    provenance.check(&sp_svc, publisher) == Origin::Pipeline
+                });
+                if let Ok(mut cmd) = taken {
                     cmd.header.stamp_ns = monotonic_ns();
                     if tq_pub.send_copy(cmd).is_ok() {
                         let _ = tq_notifier.notify();
@@ -471,7 +525,9 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let msg = *s;
                 let publisher = s.header().publisher_id().value();
                 drop(s);
-                let _ = core.accept_state(&msg, publisher, monotonic_ns());
+                let _ = core.accept_state_from(&msg, publisher, monotonic_ns(), || {
+                    provenance.check(&st_svc, publisher) == Origin::Pipeline
+                });
             }
             let now = monotonic_ns();
             if !cfg.lockstep && now.saturating_sub(last_setpoint_ns) > cfg.watchdog.stale_ns() {

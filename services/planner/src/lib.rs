@@ -455,7 +455,30 @@ impl PlannerCore {
     /// Validates a measured state (from `publisher`, received at `now_ns`); the first
     /// one sets the start position (at rest). Returns whether it was accepted.
     pub fn accept_state(&mut self, s: &BusState, publisher: u128, now_ns: u64) -> bool {
+        self.accept_state_from(s, publisher, now_ns, || true)
+    }
+
+    /// [`Self::accept_state`], where a state that would take the stream over (its owner
+    /// silent for `stale_ms`) is taken only if `from_pipeline()` says the pipeline's
+    /// supervisor started its process ([`microrobot_runtime::provenance`]); another's is
+    /// refused as an outsider's, so the planner plans only from its own actuator's
+    /// measurements.
+    pub fn accept_state_from(
+        &mut self,
+        s: &BusState,
+        publisher: u128,
+        now_ns: u64,
+        from_pipeline: impl FnOnce() -> bool,
+    ) -> bool {
         if let Err(e) = check_state(s, self.dof)
+            .and_then(|()| self.state_seq.takes_over(publisher, now_ns))
+            .and_then(|takes_over| {
+                if takes_over && !from_pipeline() {
+                    Err(Refusal::Outsider)
+                } else {
+                    Ok(())
+                }
+            })
             .and_then(|()| self.state_seq.accept(publisher, s.header.seq, now_ns))
         {
             self.counters.states_refused += 1;
@@ -982,7 +1005,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         .notifier_builder()
         .create()
         .map_err(|e| err("setpoint notifier")(&e))?;
-    let st_sub = open_publish_subscribe::<BusState>(&node, inst, ServiceKind::State)?
+    // Under a supervisor, the state stream is taken over only by its own processes.
+    let mut provenance = microrobot_runtime::provenance::Provenance::from_env();
+    let st_svc = open_publish_subscribe::<BusState>(&node, inst, ServiceKind::State)?;
+    let st_sub = st_svc
         .subscriber_builder()
         .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
         .history_request(1)
@@ -1037,7 +1063,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             let msg = *s;
             let publisher = s.header().publisher_id().value();
             drop(s);
-            core.accept_state(&msg, publisher, monotonic_ns());
+            core.accept_state_from(&msg, publisher, monotonic_ns(), || {
+                provenance.check(&st_svc, publisher)
+                    == microrobot_runtime::provenance::Origin::Pipeline
+            });
         }
         if core.started() {
             break;
@@ -1199,7 +1228,11 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
                 let publisher = s.header().publisher_id().value();
                 drop(s);
                 let new_period = msg.flags & state_flags::FINAL == 0;
-                if core.accept_state(&msg, publisher, monotonic_ns()) && on_states && new_period {
+                let taken = core.accept_state_from(&msg, publisher, monotonic_ns(), || {
+                    provenance.check(&st_svc, publisher)
+                        == microrobot_runtime::provenance::Origin::Pipeline
+                });
+                if taken && on_states && new_period {
                     let now = monotonic_ns();
                     if !cfg.lockstep {
                         // The state's stamp is the master clock's tick: lateness is the

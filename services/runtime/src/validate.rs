@@ -141,6 +141,15 @@ impl SeqTracker {
         self.owner.publisher != Some(publisher)
     }
 
+    /// Whether a message from `publisher` at `now_ns` would take the stream over
+    /// (`Ok(true)`: the first publisher, or a new one after the owner's silence),
+    /// [`Refusal::SecondPublisher`] while another one is live; changes nothing. A stage
+    /// checks where a taking-over publisher comes from ([`crate::provenance`]) first.
+    #[inline]
+    pub fn takes_over(&self, publisher: u128, now_ns: u64) -> Result<bool, Refusal> {
+        self.owner.admits(publisher, now_ns)
+    }
+
     /// Times another publisher took the stream over (restarts seen).
     pub fn publisher_changes(&self) -> u64 {
         self.owner.changes
