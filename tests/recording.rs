@@ -82,14 +82,11 @@ fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
                 "`{topic}`: publish_time is the stamp"
             );
         } else {
-            assert!(
-                ["transforms", "joints"].contains(&topic.as_str()),
-                "{topic}"
-            );
-            let t = if topic == "transforms" {
-                &v["transforms"][0]["timestamp"]
-            } else {
-                &v["timestamp"]
+            let t = match topic.as_str() {
+                "transforms" => &v["transforms"][0]["timestamp"],
+                "scene" => &v["entities"][0]["timestamp"],
+                "joints" => &v["timestamp"],
+                other => panic!("`{other}`: a message without its stamp"),
             };
             let wall =
                 t["sec"].as_u64().expect("sec") * 1_000_000_000 + t["nsec"].as_u64().expect("nsec");
@@ -345,6 +342,11 @@ fn lockstep_run_recorded_exported_plotted_and_replayed_bit_for_bit() {
         "transforms recorded from the states: {checked}"
     );
     assert!(count("joints") > 10, "joints recorded");
+    // The arm for the 3D panel: a line from the base through the joints to the tool.
+    let scene = &topics["scene"][0]["entities"][0];
+    assert_eq!(scene["frame_id"], "base_link");
+    let line = scene["lines"][0]["points"].as_array().expect("points");
+    assert_eq!(line.len(), 1 + 6 + 1, "base, six joints, tool");
     let planner = s["cycles"]["planner"].as_u64().expect("planner cycles");
     let dynamics = s["cycles"]["dynamics"].as_u64().expect("dynamics cycles");
     assert!(planner > 100, "a 2 s lockstep run does many cycles: {s}");

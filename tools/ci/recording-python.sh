@@ -52,9 +52,11 @@ with open(sys.argv[1], "rb") as f:
     for schema, channel, message in reader.iter_messages():
         names[channel.topic] = schema.name
         msg = json.loads(message.data)
-        if channel.topic in ("transforms", "joints"):
+        if channel.topic in ("transforms", "joints", "scene"):
             # Derived for viewers: stamped with the state or setpoint they come from.
-            t = msg["transforms"][0]["timestamp"] if channel.topic == "transforms" else msg["timestamp"]
+            t = {"transforms": lambda: msg["transforms"][0]["timestamp"],
+                 "scene": lambda: msg["entities"][0]["timestamp"],
+                 "joints": lambda: msg["timestamp"]}[channel.topic]()
             assert t["sec"] * 10**9 + t["nsec"] == message.log_time, (channel.topic, t)
             stamp = message.publish_time
         else:
@@ -65,6 +67,7 @@ with open(sys.argv[1], "rb") as f:
         n += 1
 assert names["transforms"] == "foxglove.FrameTransforms", names
 assert names["joints"] == "microrobot.JointStates", names
+assert names["scene"] == "foxglove.SceneUpdate", names
 rec = json.loads(open(sys.argv[3]).read().strip().splitlines()[-1])
 print(f"python mcap reader: {n} messages on the wall clock (offset {offset} ns); "
       f"{rec['bytes']} bytes, {rec['bytes_per_s'] / 1e3:.1f} kB/s")

@@ -234,14 +234,14 @@ struct Writer {
     summary: RecordSummary,
     /// Stamp of the first message of the open chunk.
     chunk_start_ns: Option<u64>,
-    /// The viewer channels: ids (`transforms`, `joints`), MCAP sequence numbers, the
+    /// The viewer channels: ids (`transforms`, `joints`, `scene`), MCAP sequence numbers, the
     /// run's robot (once its config is found), and when each was last derived.
     derived: Derived,
 }
 
 struct Derived {
-    channels: [u16; 2],
-    sequence: [u32; 2],
+    channels: [u16; 3],
+    sequence: [u32; 3],
     viewer: Option<super::viewer::Viewer>,
     /// Stamp of the last look for the run's config.
     looked_ns: Option<u64>,
@@ -310,7 +310,7 @@ impl Writer {
                 .add_channel(schema_id, topic, "json", &meta)
                 .with_context(|| format!("cannot write {}", path.display()))?;
         }
-        let mut derived_channels = [0u16; 2];
+        let mut derived_channels = [0u16; 3];
         for (i, (topic, name, schema)) in super::viewer::channels().into_iter().enumerate() {
             let schema_id = mcap
                 .add_schema(name, "jsonschema", schema.to_string().as_bytes())
@@ -373,7 +373,7 @@ impl Writer {
             chunk_start_ns: None,
             derived: Derived {
                 channels: derived_channels,
-                sequence: [0; 2],
+                sequence: [0; 3],
                 viewer: None,
                 looked_ns: None,
                 period_ns: if args.full_rate { 0 } else { VIEWER_PERIOD_NS },
@@ -467,6 +467,7 @@ impl Writer {
                 d.last_state_ns = Some(stamp);
                 out.extend(viewer.state_transforms(m, wall).map(|v| (0, v)));
                 out.extend(viewer.joints(m, wall).map(|v| (1, v)));
+                out.extend(viewer.scene(m, wall).map(|v| (2, v)));
             }
             Payload::Setpoint(m) => {
                 d.last_setpoint_ns = Some(stamp);

@@ -1,9 +1,11 @@
 //! The channels a viewer shows without knowing this project: `transforms`
 //! (`foxglove.FrameTransforms`: every joint frame, the URDF links of a URDF robot and the
 //! tool, from the model's forward kinematics of the measured state, and under `cmd/` of
-//! the commanded setpoint) and `joints` (per joint name, position, velocity, effort), both
-//! derived from the recorded streams at a viewer's rate. Foxglove's 3D panel draws the
-//! frames, its plots the joints. Derived data: the readers here skip these channels.
+//! the commanded setpoint), `scene` (`foxglove.SceneUpdate`: the arm as a line through
+//! its joint origins to the tool, with a sphere at each joint) and `joints` (per joint
+//! name, position, velocity, effort), all derived from the recorded streams at a viewer's
+//! rate. Foxglove's 3D panel draws the frames and the arm, its plots the joints. Derived
+//! data: the readers here skip these channels.
 
 use anyhow::{Context as _, Result};
 use microrobot_messages::{JointSetpoint, JointState, MAX_JOINTS};
@@ -13,7 +15,7 @@ use nalgebra::UnitQuaternion;
 use serde_json::{Value, json};
 
 /// The derived channels: (topic, schema name, JSON Schema).
-pub fn channels() -> [(&'static str, &'static str, Value); 2] {
+pub fn channels() -> [(&'static str, &'static str, Value); 3] {
     let time = json!({
         "type": "object",
         "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}},
@@ -65,14 +67,40 @@ pub fn channels() -> [(&'static str, &'static str, Value); 2] {
         },
         "required": ["timestamp", "name", "position", "velocity", "effort"]
     });
+    let objects = json!({"type": "array", "items": {"type": "object"}});
+    let entity = json!({
+        "title": "foxglove.SceneEntity",
+        "type": "object",
+        "properties": {
+            "timestamp": time,
+            "frame_id": {"type": "string"},
+            "id": {"type": "string"},
+            "lifetime": time,
+            "frame_locked": {"type": "boolean"},
+            "metadata": objects, "arrows": objects, "cubes": objects, "spheres": objects,
+            "cylinders": objects, "lines": objects, "triangles": objects, "texts": objects,
+            "models": objects
+        }
+    });
+    let scene = json!({
+        "title": "foxglove.SceneUpdate",
+        "description": "An update to the entities displayed in a 3D scene",
+        "type": "object",
+        "properties": {
+            "deletions": objects,
+            "entities": {"type": "array", "items": entity}
+        },
+        "required": ["deletions", "entities"]
+    });
     [
         ("transforms", "foxglove.FrameTransforms", transforms),
         ("joints", "microrobot.JointStates", joints),
+        ("scene", "foxglove.SceneUpdate", scene),
     ]
 }
 
 /// The topics of [`channels`].
-pub const DERIVED_TOPICS: [&str; 2] = ["transforms", "joints"];
+pub const DERIVED_TOPICS: [&str; 3] = ["transforms", "joints", "scene"];
 
 /// The root frame every transform hangs from.
 pub const ROOT_FRAME: &str = "base_link";
@@ -154,6 +182,63 @@ impl Viewer {
     pub fn setpoint_transforms(&mut self, m: &JointSetpoint, wall_ns: u64) -> Option<Value> {
         let q = self.q(&m.q, m.dof)?;
         Some(self.frames(&q, "cmd/", wall_ns))
+    }
+
+    /// The `scene` message of a measured state: the arm as a line from the base through
+    /// every joint origin to the tool, a sphere at each joint (sizes scale with the arm).
+    pub fn scene(&mut self, m: &JointState, wall_ns: u64) -> Option<Value> {
+        let q = self.q(&m.q, m.dof)?;
+        forward_kinematics(&self.robot, &mut self.data, &q);
+        let n = self.robot.dof();
+        let mut points = vec![json!({"x": 0.0, "y": 0.0, "z": 0.0})];
+        let mut reach: f64 = 0.0;
+        for i in 1..=n {
+            let p = self.data.frame(i).translation;
+            reach = reach.max(p.norm());
+            points.push(json!({"x": p.x, "y": p.y, "z": p.z}));
+        }
+        let tool = self.data.tool_frame().translation;
+        reach = reach.max(tool.norm());
+        points.push(json!({"x": tool.x, "y": tool.y, "z": tool.z}));
+        let size = (reach * 0.04).clamp(0.005, 0.1);
+        let identity = json!({
+            "position": {"x": 0.0, "y": 0.0, "z": 0.0},
+            "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+        });
+        let spheres: Vec<Value> = points[1..=n]
+            .iter()
+            .map(|p| {
+                json!({
+                    "pose": {"position": p, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+                    "size": {"x": size, "y": size, "z": size},
+                    "color": {"r": 0.9, "g": 0.5, "b": 0.1, "a": 1.0}
+                })
+            })
+            .collect();
+        Some(json!({
+            "deletions": [],
+            "entities": [{
+                "timestamp": time(wall_ns),
+                "frame_id": ROOT_FRAME,
+                "id": "arm",
+                "lifetime": {"sec": 0, "nsec": 0},
+                "frame_locked": false,
+                "metadata": [],
+                "arrows": [], "cubes": [], "cylinders": [], "triangles": [], "texts": [],
+                "models": [],
+                "spheres": spheres,
+                "lines": [{
+                    "type": 0,
+                    "pose": identity,
+                    "thickness": size / 2.0,
+                    "scale_invariant": false,
+                    "points": points,
+                    "color": {"r": 0.3, "g": 0.5, "b": 0.8, "a": 1.0},
+                    "colors": [],
+                    "indices": []
+                }]
+            }]
+        }))
     }
 
     /// The `joints` message of a measured state.
