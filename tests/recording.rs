@@ -638,16 +638,19 @@ fn a_killed_recorder_leaves_a_file_export_reads_and_recover_finishes() {
         done.stderr
     );
 
+    let export = |file: &Path, out: &Path| {
+        run(
+            &[
+                "export",
+                file.to_str().expect("utf-8"),
+                "--out",
+                out.to_str().expect("utf-8"),
+            ],
+            60.0,
+        )
+    };
     let out = dir.path().join("csv");
-    let exported = run(
-        &[
-            "export",
-            mcap_path.to_str().expect("utf-8"),
-            "--out",
-            out.to_str().expect("utf-8"),
-        ],
-        60.0,
-    );
+    let exported = export(&mcap_path, &out);
     assert_eq!(exported.code(), Some(0), "{}", exported.stderr);
     assert!(
         exported.stderr.contains("the file ends early"),
@@ -689,15 +692,7 @@ fn a_killed_recorder_leaves_a_file_export_reads_and_recover_finishes() {
         .count();
     assert_eq!(n, setpoints, "recover keeps every message export read");
     let again = dir.path().join("csv2");
-    let e2 = run(
-        &[
-            "export",
-            recovered.to_str().expect("utf-8"),
-            "--out",
-            again.to_str().expect("utf-8"),
-        ],
-        60.0,
-    );
+    let e2 = export(&recovered, &again);
     assert_eq!(e2.code(), Some(0), "{}", e2.stderr);
     assert!(!e2.stderr.contains("ends early"), "{}", e2.stderr);
     assert_eq!(rows(&again, "setpoint"), setpoints);

@@ -32,34 +32,12 @@ fn a_hostile_torque_stream_during_a_dynamics_stall_is_refused_and_latches_the_sa
     let proc = start_holding(&inst, &cfg, 90, None);
     let dynamics = pid_of(&inst, ServiceRole::Dynamics).expect("dynamics pid");
 
-    // The hostile publisher: a node and ports of this (unsupervised) test process.
-    let node = iceoryx2::prelude::NodeBuilder::new()
-        .signal_handling_mode(iceoryx2::prelude::SignalHandlingMode::Disabled)
-        .create::<iceoryx2::service::ipc::Service>()
-        .expect("node");
-    let publisher = open_publish_subscribe::<TorqueCommand>(&node, &inst, ServiceKind::Torque)
-        .expect("torque service")
-        .publisher_builder()
-        .create()
-        .expect("publisher");
-    let notifier = open_event(&node, &inst, ServiceKind::Torque)
-        .expect("torque event")
-        .notifier_builder()
-        .create()
-        .expect("notifier");
-    std::thread::sleep(Duration::from_millis(300));
-
-    // SAFETY: kill(2) on a child of the pipeline this test started.
-    unsafe { libc::kill(dynamics, libc::SIGSTOP) };
-    // Past stale_ms of silence: the stream's own publisher counts as gone.
-    std::thread::sleep(Duration::from_millis(100));
-    let injected_from = monotonic_ns();
-    for k in 0..500u64 {
-        let now = monotonic_ns();
-        let mut tau = [0.0; 8];
-        tau[0] = 30.0; // would drive joint 1 into its limit within a fraction of a second
-        publisher
-            .send_copy(TorqueCommand {
+    // The hostile publisher: this (unsupervised) test process.
+    let (injected_from, injected_to) =
+        inject_while_frozen(&inst, ServiceKind::Torque, dynamics, 500, |k, now| {
+            let mut tau = [0.0; 8];
+            tau[0] = 30.0; // would drive joint 1 into its limit within a fraction of a second
+            TorqueCommand {
                 header: Header {
                     seq: k + 1,
                     tick: MARK + k,
@@ -71,14 +49,8 @@ fn a_hostile_torque_stream_during_a_dynamics_stall_is_refused_and_latches_the_sa
                 state_seq: u64::MAX,
                 dof: 6,
                 ..Default::default()
-            })
-            .expect("send");
-        let _ = notifier.notify();
-        std::thread::sleep(Duration::from_millis(1));
-    }
-    let injected_to = monotonic_ns();
-    // SAFETY: as above.
-    unsafe { libc::kill(dynamics, libc::SIGCONT) };
+            }
+        });
 
     let refused = wait_status(
         &inst,

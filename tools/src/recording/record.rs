@@ -251,6 +251,27 @@ struct Derived {
     instance: String,
 }
 
+/// Writes one message on `(channel, sequence)` with log time `wall` (`CLOCK_REALTIME`)
+/// and publish time `stamp` (`CLOCK_MONOTONIC`) to the recording `file`.
+fn put(
+    mcap: &mut mcap::Writer<BufWriter<File>>,
+    file: &str,
+    (channel_id, sequence): (u16, u32),
+    (wall, stamp): (u64, u64),
+    data: &[u8],
+) -> Result<()> {
+    mcap.write_to_known_channel(
+        &mcap::records::MessageHeader {
+            channel_id,
+            sequence,
+            log_time: wall,
+            publish_time: stamp,
+        },
+        data,
+    )
+    .with_context(|| format!("cannot write to {file}"))
+}
+
 /// `CLOCK_REALTIME` − `CLOCK_MONOTONIC` in ns, read as a tight pair (the monotonic
 /// read between two realtime reads; the pair with the smallest gap of five).
 fn clock_offset_ns() -> i64 {
@@ -406,17 +427,13 @@ impl Writer {
         self.sequence[t] = self.sequence[t].wrapping_add(1);
         let wall = (stamp as i128 + self.summary.realtime_minus_monotonic_ns as i128)
             .clamp(0, u64::MAX as i128) as u64;
-        self.mcap
-            .write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: self.channels[t],
-                    sequence: self.sequence[t],
-                    log_time: wall,
-                    publish_time: stamp,
-                },
-                &data,
-            )
-            .with_context(|| format!("cannot write to {}", self.summary.file))?;
+        put(
+            &mut self.mcap,
+            &self.summary.file,
+            (self.channels[t], self.sequence[t]),
+            (wall, stamp),
+            &data,
+        )?;
         self.derive(&r.payload, stamp, wall)?;
         match self.chunk_start_ns {
             None => self.chunk_start_ns = Some(stamp),
@@ -478,17 +495,13 @@ impl Writer {
         for (i, v) in out {
             let data = serde_json::to_vec(&v).context("JSON encoding")?;
             d.sequence[i] = d.sequence[i].wrapping_add(1);
-            self.mcap
-                .write_to_known_channel(
-                    &mcap::records::MessageHeader {
-                        channel_id: d.channels[i],
-                        sequence: d.sequence[i],
-                        log_time: wall,
-                        publish_time: stamp,
-                    },
-                    &data,
-                )
-                .with_context(|| format!("cannot write to {}", self.summary.file))?;
+            put(
+                &mut self.mcap,
+                &self.summary.file,
+                (d.channels[i], d.sequence[i]),
+                (wall, stamp),
+                &data,
+            )?;
             let topic = super::viewer::DERIVED_TOPICS[i];
             *self.summary.messages.entry(topic.into()).or_default() += 1;
         }
