@@ -482,11 +482,7 @@ pub fn check(args: &DriverCheckArgs) -> Result<Verdict, Fail> {
     let run_dir = instance::run_dir(&cfg.instance).map_err(failure)?;
     let resolved = run_dir.join("pipeline.resolved.toml");
     instance::write_private(&resolved, cfg.to_toml_string().as_bytes()).map_err(failure)?;
-    instance::write_private(
-        &crate::driver_info::path_beside(&resolved),
-        crate::driver_info::render(&cfg, &robot, &resolved).as_bytes(),
-    )
-    .map_err(failure)?;
+    crate::driver_info::write(&cfg, &robot, &resolved).map_err(failure)?;
 
     let mut rig = Rig::open(&cfg, robot).map_err(failure)?;
     let mut driver =

@@ -6,11 +6,11 @@
 //! it from `MICROROBOT_DRIVER_INFO` (or the `{driver_info}` placeholder) and needs no
 //! robot-file parser of its own. The services do not read it.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use microrobot_model::{JointKind, Robot};
-use microrobot_runtime::config::{PipelineConfig, SafeStateMode};
+use microrobot_runtime::config::PipelineConfig;
+use toml::{Table, Value};
 
 /// The environment variable naming the file.
 pub const DRIVER_INFO_ENV: &str = "MICROROBOT_DRIVER_INFO";
@@ -20,93 +20,88 @@ pub fn path_beside(resolved: &Path) -> PathBuf {
     resolved.with_file_name("driver.toml")
 }
 
-/// A TOML string (quoted and escaped).
-fn quoted(s: &str) -> String {
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push('"');
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            c if c.is_control() => {
-                let _ = write!(out, "\\u{:04X}", c as u32);
-            }
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
-}
-
-/// A float as TOML: shortest round-trip form, infinities as `inf`.
-fn num(x: f64) -> String {
-    if x.is_infinite() {
-        if x > 0.0 { "inf" } else { "-inf" }.to_string()
-    } else if x.fract() == 0.0 && x.abs() < 1e15 {
-        format!("{x:.1}")
-    } else {
-        format!("{x}")
-    }
-}
-
 /// The file's text for `cfg` and its `robot`; `resolved` is the resolved config's path.
 /// The start position is the configured one (`actuator.sim.initial_q_deg`, clamped into
 /// the limits); a restarted driver gets the arm's last state in `MICROROBOT_RESUME_STATE`.
+/// Written with the `toml` crate, so names and numbers round-trip exactly.
 pub fn render(cfg: &PipelineConfig, robot: &Robot, resolved: &Path) -> String {
     let start = microrobot_actuator::initial_q(robot, cfg);
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
+    let path = |p: &Path| Value::String(p.display().to_string());
+    let w = &cfg.watchdog;
+    let a = &cfg.actuator;
+    let watchdog = Table::from_iter([
+        ("stale_ms".to_string(), Value::Float(w.stale_ms)),
+        ("fault_ms".to_string(), Value::Float(w.fault_ms)),
+        ("safe_state".to_string(), Value::from(w.safe_state.name())),
+        ("auto_resume".to_string(), Value::Boolean(w.auto_resume)),
+        ("ramp_ms".to_string(), Value::Float(w.ramp_ms)),
+    ]);
+    let hold = Table::from_iter([
+        ("kp_per_s2".to_string(), Value::Float(a.hold_kp_per_s2)),
+        ("kd_per_s".to_string(), Value::Float(a.hold_kd_per_s)),
+        (
+            "torque_slope_ms".to_string(),
+            Value::Float(a.torque_slope_ms),
+        ),
+    ]);
+    let joints = robot
+        .joints()
+        .iter()
+        .enumerate()
+        .map(|(i, j)| {
+            let l = &j.limits;
+            let (pos, vel, acc, effort, kind) = match j.kind {
+                JointKind::Revolute => ("rad", "rad_s", "rad_s2", "nm", "revolute"),
+                JointKind::Prismatic => ("m", "m_s", "m_s2", "n", "prismatic"),
+            };
+            Value::Table(Table::from_iter([
+                ("name".to_string(), Value::from(j.name.as_str())),
+                ("kind".to_string(), Value::from(kind)),
+                (format!("min_{pos}"), Value::Float(l.min)),
+                (format!("max_{pos}"), Value::Float(l.max)),
+                (format!("vel_{vel}"), Value::Float(l.velocity)),
+                (format!("acc_{acc}"), Value::Float(l.acceleration)),
+                (format!("effort_{effort}"), Value::Float(l.effort)),
+                (format!("start_{pos}"), Value::Float(l.clamp(start[i]))),
+            ]))
+        })
+        .collect();
+    let file = Table::from_iter([
+        ("instance".to_string(), Value::from(cfg.instance.as_str())),
+        ("rate_hz".to_string(), Value::Float(cfg.rate_hz)),
+        ("lockstep".to_string(), Value::Boolean(cfg.lockstep)),
+        (
+            "status_period_ms".to_string(),
+            Value::Float(cfg.status_period_ms),
+        ),
+        ("config".to_string(), path(resolved)),
+        ("robot".to_string(), path(&cfg.robot)),
+        ("robot_name".to_string(), Value::from(robot.name())),
+        ("dof".to_string(), Value::Integer(robot.dof() as i64)),
+        ("watchdog".to_string(), Value::Table(watchdog)),
+        ("hold".to_string(), Value::Table(hold)),
+        ("joints".to_string(), Value::Array(joints)),
+    ]);
+    format!(
         "# What an actuator driver needs for this run, written by the supervisor.\n\
          # SI units, named in each key; a driver needs nothing else (the contract page of\n\
-         # the messages crate describes every key)."
-    );
-    let _ = writeln!(s, "instance = {}", quoted(&cfg.instance));
-    let _ = writeln!(s, "rate_hz = {}", num(cfg.rate_hz));
-    let _ = writeln!(s, "lockstep = {}", cfg.lockstep);
-    let _ = writeln!(s, "status_period_ms = {}", num(cfg.status_period_ms));
-    let _ = writeln!(s, "config = {}", quoted(&resolved.display().to_string()));
-    let _ = writeln!(s, "robot = {}", quoted(&cfg.robot.display().to_string()));
-    let _ = writeln!(s, "robot_name = {}", quoted(robot.name()));
-    let _ = writeln!(s, "dof = {}", robot.dof());
-    let w = &cfg.watchdog;
-    let _ = writeln!(s, "\n[watchdog]");
-    let _ = writeln!(s, "stale_ms = {}", num(w.stale_ms));
-    let _ = writeln!(s, "fault_ms = {}", num(w.fault_ms));
-    let safe_state = match w.safe_state {
-        SafeStateMode::Hold => "hold",
-        SafeStateMode::Damp => "damp",
-    };
-    let _ = writeln!(s, "safe_state = {}", quoted(safe_state));
-    let _ = writeln!(s, "auto_resume = {}", w.auto_resume);
-    let _ = writeln!(s, "ramp_ms = {}", num(w.ramp_ms));
-    let a = &cfg.actuator;
-    let _ = writeln!(s, "\n[hold]");
-    let _ = writeln!(s, "kp_per_s2 = {}", num(a.hold_kp_per_s2));
-    let _ = writeln!(s, "kd_per_s = {}", num(a.hold_kd_per_s));
-    let _ = writeln!(s, "torque_slope_ms = {}", num(a.torque_slope_ms));
-    for (i, j) in robot.joints().iter().enumerate() {
-        let l = &j.limits;
-        let (pos, vel, acc, effort, kind) = match j.kind {
-            JointKind::Revolute => ("rad", "rad_s", "rad_s2", "nm", "revolute"),
-            JointKind::Prismatic => ("m", "m_s", "m_s2", "n", "prismatic"),
-        };
-        let _ = writeln!(s, "\n[[joints]]");
-        let _ = writeln!(s, "name = {}", quoted(&j.name));
-        let _ = writeln!(s, "kind = {}", quoted(kind));
-        let _ = writeln!(s, "min_{pos} = {}", num(l.min));
-        let _ = writeln!(s, "max_{pos} = {}", num(l.max));
-        let _ = writeln!(s, "vel_{vel} = {}", num(l.velocity));
-        let _ = writeln!(s, "acc_{acc} = {}", num(l.acceleration));
-        let _ = writeln!(s, "effort_{effort} = {}", num(l.effort));
-        let _ = writeln!(s, "start_{pos} = {}", num(l.clamp(start[i])));
-    }
-    s
+         # the messages crate describes every key).\n{file}"
+    )
+}
+
+/// Writes [`render`] beside the resolved config (owner-only, never through a symlink):
+/// what `run` and `driver-check` hand a driver.
+pub fn write(cfg: &PipelineConfig, robot: &Robot, resolved: &Path) -> anyhow::Result<()> {
+    crate::supervisor::instance::write_private(
+        &path_beside(resolved),
+        render(cfg, robot, resolved).as_bytes(),
+    )
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use microrobot_runtime::config::SafeStateMode;
 
     fn robot(file: &str) -> Robot {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -782,11 +782,7 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     let resolved = run_dir.join("pipeline.resolved.toml");
     instance::write_private(&resolved, cfg.to_toml_string().as_bytes())
         .map_err(fail(exit_code::FAILURE))?;
-    instance::write_private(
-        &crate::driver_info::path_beside(&resolved),
-        crate::driver_info::render(&cfg, &robot, &resolved).as_bytes(),
-    )
-    .map_err(fail(exit_code::FAILURE))?;
+    crate::driver_info::write(&cfg, &robot, &resolved).map_err(fail(exit_code::FAILURE))?;
 
     let stop_flag = Arc::new(AtomicBool::new(false));
     {

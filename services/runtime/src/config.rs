@@ -45,6 +45,16 @@ pub enum SafeStateMode {
     Damp,
 }
 
+impl SafeStateMode {
+    /// The config's name for it (`watchdog.safe_state`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Hold => "hold",
+            Self::Damp => "damp",
+        }
+    }
+}
+
 /// What the planner's clock does after it woke more than one period late.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OverrunPolicy {
@@ -416,14 +426,7 @@ impl PipelineConfig {
         let _ = writeln!(s, "\n[watchdog]");
         let _ = writeln!(s, "stale_ms = {}", f(w.stale_ms));
         let _ = writeln!(s, "fault_ms = {}", f(w.fault_ms));
-        let _ = writeln!(
-            s,
-            "safe_state = {}",
-            quote(match w.safe_state {
-                SafeStateMode::Hold => "hold",
-                SafeStateMode::Damp => "damp",
-            })
-        );
+        let _ = writeln!(s, "safe_state = {}", quote(w.safe_state.name()));
         let _ = writeln!(s, "auto_resume = {}", w.auto_resume);
         let _ = writeln!(s, "ramp_ms = {}", f(w.ramp_ms));
         let p = &self.planner;
