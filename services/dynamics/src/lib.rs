@@ -169,10 +169,10 @@ impl DynamicsCore {
         now_ns: u64,
         from_pipeline: impl FnOnce() -> bool,
     ) -> Result<(), Refusal> {
-        let r = check_state(msg, self.dof)
-            .and_then(|()| self.st_seq.takes_over(publisher, now_ns))
-            .and_then(|takes_over| outsider(takes_over, from_pipeline))
-            .and_then(|()| self.st_seq.accept(publisher, msg.header.seq, now_ns));
+        let r = check_state(msg, self.dof).and_then(|()| {
+            self.st_seq
+                .accept_from(publisher, msg.header.seq, now_ns, from_pipeline)
+        });
         match r {
             Ok(()) => {
                 // The actuator's final state repeats its last period's tick: in lockstep
@@ -232,9 +232,10 @@ impl DynamicsCore {
                     check_fresh(sp.header.stamp_ns, now_ns, self.stale_ns)
                 }
             })
-            .and_then(|()| self.sp_seq.takes_over(publisher, now_ns))
-            .and_then(|takes_over| outsider(takes_over, from_pipeline))
-            .and_then(|()| self.sp_seq.accept(publisher, sp.header.seq, now_ns));
+            .and_then(|()| {
+                self.sp_seq
+                    .accept_from(publisher, sp.header.seq, now_ns, from_pipeline)
+            });
         if let Err(e) = r {
             self.counters.refused += 1;
             self.last_refusal = Some(e);
@@ -355,18 +356,6 @@ impl DynamicsCore {
             self.peak_torque[i] = self.peak_torque[i].max(tau[i].abs());
         }
         Ok(out)
-    }
-}
-
-/// `Err(Outsider)` for a message that would take a stream over (its owner silent for
-/// `stale_ms`) from a process the pipeline's supervisor did not start (`from_pipeline()`
-/// is asked only then); while the owner is live, any other publisher is refused as a
-/// second publisher before this.
-fn outsider(takes_over: bool, from_pipeline: impl FnOnce() -> bool) -> Result<(), Refusal> {
-    if takes_over && !from_pipeline() {
-        Err(Refusal::Outsider)
-    } else {
-        Ok(())
     }
 }
 

@@ -470,17 +470,10 @@ impl PlannerCore {
         now_ns: u64,
         from_pipeline: impl FnOnce() -> bool,
     ) -> bool {
-        if let Err(e) = check_state(s, self.dof)
-            .and_then(|()| self.state_seq.takes_over(publisher, now_ns))
-            .and_then(|takes_over| {
-                if takes_over && !from_pipeline() {
-                    Err(Refusal::Outsider)
-                } else {
-                    Ok(())
-                }
-            })
-            .and_then(|()| self.state_seq.accept(publisher, s.header.seq, now_ns))
-        {
+        if let Err(e) = check_state(s, self.dof).and_then(|()| {
+            self.state_seq
+                .accept_from(publisher, s.header.seq, now_ns, from_pipeline)
+        }) {
             self.counters.states_refused += 1;
             self.last_state_refusal = Some(e);
             return false;

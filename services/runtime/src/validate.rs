@@ -150,6 +150,25 @@ impl SeqTracker {
         self.owner.admits(publisher, now_ns)
     }
 
+    /// [`Self::accept`], where a message that would take the stream over (the first
+    /// publisher, or a new one after the owner's silence) is taken only if
+    /// `from_pipeline()` says the pipeline's supervisor started its process
+    /// ([`crate::provenance`]); another's is [`Refusal::Outsider`]. `from_pipeline` is
+    /// asked only on a takeover, so the steady stream pays nothing for it.
+    #[inline]
+    pub fn accept_from(
+        &mut self,
+        publisher: u128,
+        seq: u64,
+        now_ns: u64,
+        from_pipeline: impl FnOnce() -> bool,
+    ) -> Result<(), Refusal> {
+        if self.takes_over(publisher, now_ns)? && !from_pipeline() {
+            return Err(Refusal::Outsider);
+        }
+        self.accept(publisher, seq, now_ns)
+    }
+
     /// Times another publisher took the stream over (restarts seen).
     pub fn publisher_changes(&self) -> u64 {
         self.owner.changes
@@ -265,6 +284,44 @@ mod tests {
         assert_eq!(t.lost, 0);
         // And now the old one is the second publisher.
         assert_eq!(t.accept(1, 102, 1_101), Err(Refusal::SecondPublisher));
+    }
+
+    #[test]
+    fn provenance_is_asked_only_on_a_takeover_and_an_outsider_changes_nothing() {
+        let mut t = SeqTracker::new(50);
+        let asked = std::cell::Cell::new(0);
+        let from = |ok: bool| {
+            let asked = &asked;
+            move || {
+                asked.set(asked.get() + 1);
+                ok
+            }
+        };
+        // The first publisher takes the stream: asked once.
+        assert_eq!(t.accept_from(1, 10, 1_000, from(true)), Ok(()));
+        assert_eq!(asked.get(), 1);
+        // The steady stream is not asked.
+        assert_eq!(t.accept_from(1, 11, 1_010, from(false)), Ok(()));
+        assert_eq!(asked.get(), 1);
+        // A second publisher while the owner is live: refused before provenance.
+        assert_eq!(
+            t.accept_from(2, 0, 1_020, from(true)),
+            Err(Refusal::SecondPublisher)
+        );
+        assert_eq!(asked.get(), 1);
+        // After the owner's silence an outsider is refused and the stream stays the
+        // owner's: its next message is in sequence, nothing counted lost.
+        assert_eq!(
+            t.accept_from(3, 0, 1_100, from(false)),
+            Err(Refusal::Outsider)
+        );
+        assert_eq!(asked.get(), 2);
+        assert_eq!(t.publisher_changes(), 0);
+        assert_eq!(t.accept_from(1, 12, 1_101, from(false)), Ok(()));
+        assert_eq!((t.last(), t.lost), (Some(12), 0));
+        // A restarted pipeline process takes over after the silence.
+        assert_eq!(t.accept_from(4, 0, 1_200, from(true)), Ok(()));
+        assert_eq!(t.publisher_changes(), 1);
     }
 
     #[test]

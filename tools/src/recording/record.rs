@@ -57,8 +57,8 @@ pub struct RecordArgs {
     /// SCHED_FIFO priority of the draining thread (0: normal scheduling).
     #[arg(long, default_value_t = 10, value_name = "PRIO")]
     pub rt_priority: i32,
-    /// Derive the viewer channels (`transforms`, `joints`) from every state and setpoint
-    /// instead of at 100 Hz.
+    /// Derive the viewer channels (`transforms`, `joints`, `scene`) from every state and
+    /// setpoint instead of at 100 Hz.
     #[arg(long)]
     pub full_rate: bool,
 }
@@ -272,6 +272,46 @@ fn put(
     .with_context(|| format!("cannot write to {file}"))
 }
 
+/// `CLOCK_REALTIME` ns of the `CLOCK_MONOTONIC` stamp `mono`, given
+/// `realtime_minus_monotonic_ns` ([`clock_offset_ns`]), clamped to the log time's range.
+fn wall_ns(mono: u64, offset: i64) -> u64 {
+    (mono as i128 + offset as i128).clamp(0, u64::MAX as i128) as u64
+}
+
+/// Adds a JSON channel `topic` with its JSON schema `(name, schema)` to the recording
+/// at `path`; returns the channel id.
+fn add_channel(
+    mcap: &mut mcap::Writer<BufWriter<File>>,
+    path: &std::path::Path,
+    (topic, name, schema): (&str, &str, &Value),
+    meta: &BTreeMap<String, String>,
+) -> Result<u16> {
+    let schema_id = mcap
+        .add_schema(name, "jsonschema", schema.to_string().as_bytes())
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    mcap.add_channel(schema_id, topic, "json", meta)
+        .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Attaches the run's resolved config (`data`, TOML) to the recording `file`, stamped
+/// with the wall-clock time now.
+fn attach_config(
+    mcap: &mut mcap::Writer<BufWriter<File>>,
+    file: &str,
+    offset: i64,
+    data: Vec<u8>,
+) -> Result<()> {
+    let now = wall_ns(monotonic_ns(), offset);
+    mcap.attach(&mcap::Attachment {
+        log_time: now,
+        create_time: now,
+        name: CONFIG_ATTACHMENT.to_string(),
+        media_type: "application/toml".to_string(),
+        data: data.into(),
+    })
+    .with_context(|| format!("cannot write to {file}"))
+}
+
 /// `CLOCK_REALTIME` − `CLOCK_MONOTONIC` in ns, read as a tight pair (the monotonic
 /// read between two realtime reads; the pair with the smallest gap of five).
 fn clock_offset_ns() -> i64 {
@@ -319,26 +359,16 @@ impl Writer {
             .library(concat!("microrobot ", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::with_capacity(1 << 20, file))
             .with_context(|| format!("cannot start MCAP file {}", path.display()))?;
-        let mut channels = [0u16; 5];
         let mut meta = BTreeMap::new();
         meta.insert("instance".to_string(), args.instance.clone());
+        let mut channels = [0u16; 5];
         for (i, topic) in TOPICS.iter().enumerate() {
             let (name, schema) = super::schema(topic)?;
-            let schema_id = mcap
-                .add_schema(name, "jsonschema", schema.to_string().as_bytes())
-                .with_context(|| format!("cannot write {}", path.display()))?;
-            channels[i] = mcap
-                .add_channel(schema_id, topic, "json", &meta)
-                .with_context(|| format!("cannot write {}", path.display()))?;
+            channels[i] = add_channel(&mut mcap, path, (topic, name, &schema), &meta)?;
         }
         let mut derived_channels = [0u16; 3];
         for (i, (topic, name, schema)) in super::viewer::channels().into_iter().enumerate() {
-            let schema_id = mcap
-                .add_schema(name, "jsonschema", schema.to_string().as_bytes())
-                .with_context(|| format!("cannot write {}", path.display()))?;
-            derived_channels[i] = mcap
-                .add_channel(schema_id, topic, "json", &meta)
-                .with_context(|| format!("cannot write {}", path.display()))?;
+            derived_channels[i] = add_channel(&mut mcap, path, (topic, name, &schema), &meta)?;
         }
         let offset = clock_offset_ns();
         let clocks = BTreeMap::from([
@@ -369,15 +399,7 @@ impl Writer {
         // The run's config now if the pipeline is up (so a killed recorder keeps it),
         // else at the end.
         if let Some(data) = run_config(&args.instance) {
-            let now = (monotonic_ns() as i64 + offset).max(0) as u64;
-            mcap.attach(&mcap::Attachment {
-                log_time: now,
-                create_time: now,
-                name: CONFIG_ATTACHMENT.to_string(),
-                media_type: "application/toml".to_string(),
-                data: data.into(),
-            })
-            .with_context(|| format!("cannot write {}", path.display()))?;
+            attach_config(&mut mcap, &summary.file, offset, data)?;
             summary.config_attached = true;
         }
         for t in TOPICS {
@@ -425,8 +447,7 @@ impl Writer {
         self.summary.max_lag_us = self.summary.max_lag_us.max(lag_us);
         let data = serde_json::to_vec(&r.payload.json()).context("JSON encoding")?;
         self.sequence[t] = self.sequence[t].wrapping_add(1);
-        let wall = (stamp as i128 + self.summary.realtime_minus_monotonic_ns as i128)
-            .clamp(0, u64::MAX as i128) as u64;
+        let wall = wall_ns(stamp, self.summary.realtime_minus_monotonic_ns);
         put(
             &mut self.mcap,
             &self.summary.file,
@@ -515,17 +536,8 @@ impl Writer {
             run_config(instance)
         };
         if let Some(data) = data {
-            let now =
-                (monotonic_ns() as i64 + self.summary.realtime_minus_monotonic_ns).max(0) as u64;
-            self.mcap
-                .attach(&mcap::Attachment {
-                    log_time: now,
-                    create_time: now,
-                    name: CONFIG_ATTACHMENT.to_string(),
-                    media_type: "application/toml".to_string(),
-                    data: data.into(),
-                })
-                .with_context(|| format!("cannot write to {}", self.summary.file))?;
+            let offset = self.summary.realtime_minus_monotonic_ns;
+            attach_config(&mut self.mcap, &self.summary.file, offset, data)?;
             self.summary.config_attached = true;
         }
         self.mcap

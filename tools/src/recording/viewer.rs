@@ -16,24 +16,9 @@ use serde_json::{Value, json};
 
 /// The derived channels: (topic, schema name, JSON Schema).
 pub fn channels() -> [(&'static str, &'static str, Value); 3] {
-    let time = json!({
-        "type": "object",
-        "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}},
-        "required": ["sec", "nsec"]
-    });
-    let vec3 = json!({
-        "type": "object",
-        "properties": {"x": {"type": "number"}, "y": {"type": "number"}, "z": {"type": "number"}},
-        "required": ["x", "y", "z"]
-    });
-    let quat = json!({
-        "type": "object",
-        "properties": {
-            "x": {"type": "number"}, "y": {"type": "number"},
-            "z": {"type": "number"}, "w": {"type": "number"}
-        },
-        "required": ["x", "y", "z", "w"]
-    });
+    let time = object_of("integer", &["sec", "nsec"]);
+    let vec3 = object_of("number", &["x", "y", "z"]);
+    let quat = object_of("number", &["x", "y", "z", "w"]);
     let transform = json!({
         "title": "foxglove.FrameTransform",
         "type": "object",
@@ -97,6 +82,16 @@ pub fn channels() -> [(&'static str, &'static str, Value); 3] {
         ("joints", "microrobot.JointStates", joints),
         ("scene", "foxglove.SceneUpdate", scene),
     ]
+}
+
+/// The JSON Schema of an object whose `fields` are all required and of JSON type `ty`
+/// (a time `{sec, nsec}`, a vector `{x, y, z}`, a quaternion `{x, y, z, w}`).
+fn object_of(ty: &str, fields: &[&str]) -> Value {
+    let properties: serde_json::Map<String, Value> = fields
+        .iter()
+        .map(|f| (f.to_string(), json!({ "type": ty })))
+        .collect();
+    json!({"type": "object", "properties": properties, "required": fields})
 }
 
 /// The topics of [`channels`].
