@@ -20,7 +20,9 @@ pub mod stream;
 
 pub use command::{CommandKind, MotionCommand, ProfileKind, TargetSpace};
 pub use master::MasterPose;
-pub use ports::{BusError, ServiceKind, open_event, open_publish_subscribe, service_name};
+pub use ports::{
+    BusError, ServiceKind, Topic, open_event, open_publish_subscribe, service_name, topic,
+};
 pub use status::{
     Activity, COMMAND_VERDICTS, CommandVerdict, LatencySummary, LifecycleState, ProgramEnd,
     ProgramState, RefusalQuantity, RefusalReason, ServiceRole, ServiceStatus, VerdictLookup,

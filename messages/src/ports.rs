@@ -97,6 +97,58 @@ fn to_service_name(name: &str) -> Result<ServiceName, BusError> {
     })
 }
 
+/// A stream of the contract with its payload type: `Topic<JointSetpoint>` can only be
+/// opened as setpoints, so a process cannot subscribe to one stream with another's
+/// payload (iceoryx2 would refuse it at run time; this refuses it at compile time).
+#[derive(Debug)]
+pub struct Topic<T> {
+    kind: ServiceKind,
+    _payload: std::marker::PhantomData<fn() -> T>,
+}
+
+impl<T> Clone for Topic<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<T> Copy for Topic<T> {}
+
+impl<T> Topic<T> {
+    const fn new(kind: ServiceKind) -> Self {
+        Self {
+            kind,
+            _payload: std::marker::PhantomData,
+        }
+    }
+
+    /// The stream.
+    pub const fn kind(self) -> ServiceKind {
+        self.kind
+    }
+}
+
+/// The typed streams of the contract, one per [`ServiceKind`].
+pub mod topic {
+    use super::{ServiceKind, Topic};
+    use crate::{
+        JointSetpoint, JointState, MasterPose, MotionCommand, ServiceStatus, TorqueCommand,
+    };
+
+    /// Planner → dynamics.
+    pub const SETPOINT: Topic<JointSetpoint> = Topic::new(ServiceKind::Setpoint);
+    /// Dynamics → actuator.
+    pub const TORQUE: Topic<TorqueCommand> = Topic::new(ServiceKind::Torque);
+    /// Actuator → planner and dynamics.
+    pub const STATE: Topic<JointState> = Topic::new(ServiceKind::State);
+    /// Any client → planner (and the actuator's reset).
+    pub const COMMAND: Topic<MotionCommand> = Topic::new(ServiceKind::Command);
+    /// Every service → supervisor and monitors.
+    pub const STATUS: Topic<ServiceStatus> = Topic::new(ServiceKind::Status);
+    /// Master device → planner.
+    pub const MASTER: Topic<MasterPose> = Topic::new(ServiceKind::Master);
+}
+
 /// Opens (or creates) the publish-subscribe service `kind` of `instance` with the
 /// contract's QoS. `T` must be the payload type of `kind`.
 pub fn open_publish_subscribe<T>(

@@ -7,16 +7,18 @@
 //! last state and status on SIGINT/SIGTERM.
 
 use anyhow::Context as _;
-use iceoryx2::port::update_connections::UpdateConnections;
 use microrobot_messages::{
-    CommandKind, JointSetpoint, JointState, MotionCommand, ServiceKind, ServiceRole, ServiceStatus,
-    TorqueCommand, monotonic_ns, open_event, open_publish_subscribe,
+    CommandKind, JointState, MotionCommand, RefusalReason, ServiceRole, ServiceStatus,
+    TorqueCommand, monotonic_ns, topic,
 };
 use microrobot_model::{JointVector, Robot};
 use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::Refusal;
-use microrobot_runtime::{BadConfig, PeriodicClock, Reactor, Shutdown, StatusPort, open_node};
+use microrobot_runtime::{
+    BadConfig, Cycle, Inbox, Outbox, PeriodicClock, Reactor, Ready, Shutdown, Source, Stage,
+    Subscription, Ticker, TimerFd,
+};
 
 use crate::{ActuatorBackend, ActuatorCore, ResumeState, initial_q, load_robot};
 
@@ -98,56 +100,85 @@ where
 {
     let robot = load_robot(cfg)?;
     let dof = robot.dof();
-    let inst = cfg.instance.as_str();
-    let node = open_node(inst, ServiceRole::Actuator)?;
+    microrobot_runtime::serve(cfg, shutdown, ServiceRole::Actuator, |setup| {
+        let (node, inst) = (setup.node, setup.instance());
+        let torques = Inbox::open(node, inst, topic::TORQUE, Subscription::CYCLIC)?;
+        let states = Outbox::open(node, inst, topic::STATE)?;
+        let commands = Inbox::open(
+            node,
+            inst,
+            topic::COMMAND,
+            Subscription::CYCLIC.default_queue(),
+        )?;
+        let start = start_state(cfg, &robot, setup.shutdown, node)?;
+        let backend = make_backend(&Setup {
+            cfg,
+            robot: &robot,
+            start: start.state,
+        })
+        .context("actuator backend")?;
+        if backend.dof() != dof {
+            return Err(BadConfig(format!(
+                "the actuator backend drives {} joints, the robot `{}` has {dof}",
+                backend.dof(),
+                robot.name()
+            ))
+            .into());
+        }
+        let mut core = ActuatorCore::new(backend, &robot, cfg).context("actuator backend")?;
+        if let Some(r) = &start.resume {
+            core.resume_after_restart(&r.tau, !cfg.watchdog.auto_resume);
+        }
+        let PeriodicClock { timer, ticker } =
+            PeriodicClock::start(cfg.period_ns(), cfg.realtime.overrun)?;
+        let ports = Ports {
+            torques,
+            states,
+            commands,
+            timer,
+        };
+        let mut stage = ActuatorStage {
+            core,
+            ticker,
+            e2e: LatencyHistogram::new(),
+            // Free-running with the planner on its own timer, the plant steps are phased
+            // half a period after the planner's ticks (see `wake`). When the planner
+            // ticks on states, this timer is the pipeline's master clock and stays.
+            phased: cfg.planner_ticks_on_states(),
+            answered: u64::MAX,
+            accepted: u64::MAX,
+            faults_logged: 0,
+        };
+        // Initial state (history 1 on State: the planner starts from it).
+        let first = stage.core.state_message(monotonic_ns());
+        stage.publish(&ports, first);
+        Ok(Some((stage, ports)))
+    })
+}
 
-    let torque_svc = open_publish_subscribe::<TorqueCommand>(&node, inst, ServiceKind::Torque)?;
-    let mut provenance = microrobot_runtime::provenance::Provenance::from_env();
-    let torque_sub = torque_svc
-        .subscriber_builder()
-        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
-        .history_request(0)
-        .create()
-        .map_err(|e| anyhow::anyhow!("torque subscriber: {e:?}"))?;
-    let torque_listener = open_event(&node, inst, ServiceKind::Torque)?
-        .listener_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("torque listener: {e:?}"))?;
-    let state_pub = open_publish_subscribe::<JointState>(&node, inst, ServiceKind::State)?
-        .publisher_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("state publisher: {e:?}"))?;
-    let state_notifier = open_event(&node, inst, ServiceKind::State)?
-        .notifier_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("state notifier: {e:?}"))?;
-    let cmd_sub = open_publish_subscribe::<MotionCommand>(&node, inst, ServiceKind::Command)?
-        .subscriber_builder()
-        .history_request(0)
-        .create()
-        .map_err(|e| anyhow::anyhow!("command subscriber: {e:?}"))?;
-    let cmd_listener = open_event(&node, inst, ServiceKind::Command)?
-        .listener_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("command listener: {e:?}"))?;
-    let sp_sub = open_publish_subscribe::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?
-        .subscriber_builder()
-        .history_request(1)
-        .create()
-        .map_err(|e| anyhow::anyhow!("setpoint subscriber: {e:?}"))?;
-    let mut status = StatusPort::open(&node, inst, ServiceRole::Actuator, cfg.status_period_ms)?;
+/// The start state and, after a restart, the handed-over state it came from.
+struct Start {
+    state: StartState,
+    resume: Option<ResumeState>,
+}
 
-    // Resume where the arm is: the predecessor's last published state (handed over by
-    // the supervisor after a restart), else a running planner's last setpoint, else the
-    // config.
-    let resume = ResumeState::from_env(&robot).map_err(BadConfig)?;
-    let mut start = StartState {
-        q: initial_q(&robot, cfg),
+/// Where the arm is: the predecessor's last published state (handed over by the
+/// supervisor after a restart), else a running planner's last setpoint (listened for
+/// [`RESUME_PROBE_MS`]), else the config.
+fn start_state(
+    cfg: &PipelineConfig,
+    robot: &Robot,
+    shutdown: &Shutdown,
+    node: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
+) -> anyhow::Result<Start> {
+    let resume = ResumeState::from_env(robot).map_err(BadConfig)?;
+    let mut state = StartState {
+        q: initial_q(robot, cfg),
         qd: JointVector::zeros(),
         from: StartFrom::Config,
     };
     if let Some(r) = &resume {
-        start = StartState {
+        state = StartState {
             q: r.q,
             qd: r.qd,
             from: StartFrom::Restart,
@@ -160,71 +191,227 @@ where
                 " in the safe state (send a reset to resume)"
             }
         );
+        return Ok(Start { state, resume });
     }
+    let setpoints = Inbox::open(
+        node,
+        &cfg.instance,
+        topic::SETPOINT,
+        Subscription::CYCLIC
+            .default_queue()
+            .with_history(1)
+            .polled(),
+    )?;
+    let dof = robot.dof();
     let probe_end = monotonic_ns() + RESUME_PROBE_MS * 1_000_000;
-    'probe: while resume.is_none() && monotonic_ns() < probe_end && !shutdown.is_requested() {
-        while let Ok(Some(s)) = sp_sub.receive() {
+    while monotonic_ns() < probe_end && !shutdown.is_requested() {
+        while let Some(r) = setpoints.next() {
+            let s = r.msg;
             if s.dof as usize == dof && microrobot_messages::all_finite(&s.q, s.dof) {
-                start.q = JointVector::from_column_slice(&s.q);
-                start.from = StartFrom::PlannerSetpoint;
+                state.q = JointVector::from_column_slice(&s.q);
+                state.from = StartFrom::PlannerSetpoint;
                 tracing::info!("actuator: resuming the arm at the planner's last setpoint");
-                break 'probe;
+                return Ok(Start { state, resume });
             }
         }
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
-    drop(sp_sub);
+    Ok(Start { state, resume })
+}
 
-    let backend = make_backend(&Setup {
-        cfg,
-        robot: &robot,
-        start,
-    })
-    .context("actuator backend")?;
-    if backend.dof() != dof {
-        return Err(BadConfig(format!(
-            "the actuator backend drives {} joints, the robot `{}` has {dof}",
-            backend.dof(),
-            robot.name()
-        ))
-        .into());
+/// The ports of the actuator stage.
+pub(crate) struct Ports {
+    torques: Inbox<TorqueCommand>,
+    states: Outbox<JointState>,
+    /// Resets (every other command is the planner's).
+    commands: Inbox<MotionCommand>,
+    /// The plant's period (free-running) and the watchdogs' clock.
+    timer: TimerFd,
+}
+
+#[derive(Clone, Copy)]
+pub(crate) struct Sources {
+    torque: Source,
+    command: Source,
+    timer: Source,
+}
+
+/// The framework around a backend: [`ActuatorCore`] (lifecycle, watchdogs, safe-state
+/// latch, one-publisher rule) and the bookkeeping of the cycle.
+pub(crate) struct ActuatorStage<B: ActuatorBackend> {
+    core: ActuatorCore<B>,
+    ticker: Ticker,
+    /// Setpoint source stamp → torque received.
+    e2e: LatencyHistogram,
+    /// Whether the plant's steps are phased against the planner's ticks (or need not be).
+    phased: bool,
+    /// The torque the last published state answered, and the last torque accepted: in
+    /// lockstep every torque is owed one state.
+    answered: u64,
+    accepted: u64,
+    faults_logged: u64,
+}
+
+impl<B: ActuatorBackend> ActuatorStage<B> {
+    fn publish(&mut self, ports: &Ports, s: JointState) {
+        self.answered = s.torque_seq;
+        ports.states.send(s);
     }
-    let mut core = ActuatorCore::new(backend, &robot, cfg).context("actuator backend")?;
-    if let Some(r) = &resume {
-        core.resume_after_restart(&r.tau, !cfg.watchdog.auto_resume);
+
+    /// Checks the watchdogs and steps the plant once, publishing its state.
+    fn step(&mut self, ports: &Ports, now: u64) {
+        self.core.check_watchdog(now);
+        let s = self.core.step(monotonic_ns());
+        self.publish(ports, s);
     }
-    let mut e2e = LatencyHistogram::new();
 
-    let PeriodicClock { timer, mut ticker } =
-        PeriodicClock::start(cfg.period_ns(), cfg.realtime.overrun)?;
-    let mut reactor = Reactor::new().context("epoll")?;
-    let on_torque = reactor.add(&torque_listener).context("epoll")?;
-    let on_command = reactor.add(&cmd_listener).context("epoll")?;
-    let on_timer = reactor.add(&timer).context("epoll")?;
-    let on_stop = reactor.add(shutdown).context("epoll")?;
+    /// Free-running: puts the plant steps half a period after the planner's ticks, so
+    /// torque k is applied in the step that ends before setpoint k+1 (the same
+    /// one-period loop delay as lockstep).
+    fn phase(&mut self, ports: &Ports, cfg: &PipelineConfig, source_stamp_ns: u64, now: u64) {
+        self.phased = true;
+        let p = cfg.period_ns();
+        let mut first = source_stamp_ns + p / 2;
+        while first <= now {
+            first += p;
+        }
+        if ports.timer.arm_absolute(first, p).is_ok() {
+            let _ = ports.timer.read_expirations();
+            self.ticker = Ticker::new(first, p, cfg.realtime.overrun);
+        }
+    }
 
-    // Free-running with the planner on its own timer, the plant steps are phased half a
-    // period after the planner's ticks (below). When the planner ticks on states, this
-    // timer is the pipeline's master clock and is left where it is.
-    let mut phased = cfg.planner_ticks_on_states();
-    // The torque the last published state answered, and the last torque accepted: in
-    // lockstep every torque is owed one state.
-    let answered = std::cell::Cell::new(u64::MAX);
-    let mut accepted = u64::MAX;
-    let publish = |s: JointState| {
-        answered.set(s.torque_seq);
-        let ok = state_pub.send_copy(s).is_ok();
-        let _ = state_notifier.notify();
-        ok
-    };
-    // Initial state (history 1 on State: the planner starts from it).
-    publish(core.state_message(monotonic_ns()));
+    fn take_torques(&mut self, ports: &Ports, cfg: &PipelineConfig, was_latched: &mut bool) {
+        ports.torques.drain(|r| {
+            let msg = r.msg;
+            let now = monotonic_ns();
+            let verdict = self
+                .core
+                .accept_torque_from(&msg, r.publisher, now, || r.from_pipeline());
+            if verdict == Err(Refusal::Outsider) && !*was_latched && self.core.safe_state_latched()
+            {
+                *was_latched = true;
+                tracing::error!(
+                    "actuator: a torque command from a process the supervisor did not start: refused, safe state latched; send a reset once the pipeline's own dynamics publishes again"
+                );
+            }
+            if verdict.is_ok() {
+                self.accepted = msg.header.seq;
+                self.e2e
+                    .record(now.saturating_sub(msg.header.source_stamp_ns));
+                if !cfg.lockstep && !self.phased {
+                    self.phase(ports, cfg, msg.header.source_stamp_ns, now);
+                }
+                if !self.core.steps_on_timer() {
+                    self.step(ports, now);
+                }
+            }
+        });
+    }
 
-    let mut st = ServiceStatus {
-        ready: 1,
-        ..Default::default()
-    };
-    let fill = |st: &mut ServiceStatus, core: &ActuatorCore<B>, e2e: &LatencyHistogram| {
+    fn take_commands(&mut self, ports: &Ports, cfg: &PipelineConfig, woken: bool) {
+        if woken {
+            ports.commands.clear_events();
+        }
+        ports.commands.for_each(|r| {
+            if CommandKind::from_wire(r.msg.kind) == Some(CommandKind::Reset)
+                && self.core.reset(monotonic_ns())
+            {
+                tracing::info!("actuator: reset, following torque commands again");
+                // Lockstep: a torque taken while latched and not yet answered by a
+                // timer step is answered now, or the loop (which ticks on states)
+                // would wait for a state while this waits for a torque.
+                if cfg.lockstep && self.accepted != u64::MAX && self.accepted != self.answered {
+                    self.step(ports, monotonic_ns());
+                }
+            }
+        });
+    }
+
+    fn on_timer(&mut self, ports: &Ports, cfg: &PipelineConfig) {
+        self.ticker.on_expirations(ports.timer.read_expirations());
+        // Hands the last state (history 1) to subscribers that joined since the last
+        // send: in lockstep nothing is sent until the first torque, and the planner
+        // starts from that state.
+        ports.states.update_connections();
+        let stale_ns = cfg.watchdog.stale_ns();
+        let mut n = 0;
+        while let Some(tick) = self.ticker.next_tick() {
+            let now = monotonic_ns();
+            // Free-running, a period that ended more than `stale_ms` ago is not replayed
+            // (a stall): no torque that old is applied, and the plant does not run a
+            // burst of catch-up steps.
+            if !cfg.lockstep && now.saturating_sub(tick.ideal_ns) > stale_ns {
+                continue;
+            }
+            self.core.check_watchdog(now);
+            if self.core.steps_on_timer() && n < 100 {
+                let s = self.core.step(now);
+                self.publish(ports, s);
+                n += 1;
+            }
+        }
+    }
+}
+
+impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
+    type Ports = Ports;
+    type Sources = Sources;
+
+    fn register<'p>(ports: &'p Ports, reactor: &mut Reactor<'p>) -> std::io::Result<Sources> {
+        let missing = || std::io::Error::other("an actuator inbox has no listener");
+        Ok(Sources {
+            torque: reactor.add(ports.torques.listener().ok_or_else(missing)?)?,
+            command: reactor.add(ports.commands.listener().ok_or_else(missing)?)?,
+            timer: reactor.add(&ports.timer)?,
+        })
+    }
+
+    fn wake(
+        &mut self,
+        ports: &Ports,
+        on: Sources,
+        ready: Ready,
+        cycle: &mut Cycle<'_>,
+    ) -> anyhow::Result<()> {
+        let cfg = cycle.cfg;
+        let mut was_latched = self.core.safe_state_latched();
+        // Before any queued command can feed the watchdog: was this process stalled?
+        if let Some(gap) = self.core.on_wake(monotonic_ns()) {
+            tracing::warn!(
+                "actuator: stalled for {:.1} ms (longer than stale_ms = {} ms): the missed periods are not replayed; holding until a torque command answers a state published after the stall",
+                gap as f64 * 1e-6,
+                cfg.watchdog.stale_ms
+            );
+        }
+        if ready.contains(on.torque) {
+            self.take_torques(ports, cfg, &mut was_latched);
+        }
+        // Commands are looked at on every wake-up (see the planner: a new sender's sample
+        // can become visible after its notification).
+        self.take_commands(ports, cfg, ready.contains(on.command));
+        if ready.contains(on.timer) {
+            self.on_timer(ports, cfg);
+        }
+        if self.core.safe_state_latched() && !was_latched {
+            tracing::warn!(
+                "actuator: no valid torque command for {} ms: safe state latched ({:?}); send a reset to resume",
+                cfg.watchdog.fault_ms,
+                cfg.watchdog.safe_state
+            );
+        }
+        if self.core.backend_faults() != self.faults_logged {
+            self.faults_logged = self.core.backend_faults();
+            if let Some(f) = self.core.last_fault() {
+                tracing::error!("actuator: backend fault: {f}; send a reset to acknowledge");
+            }
+        }
+        Ok(())
+    }
+
+    fn report(&self, st: &mut ServiceStatus) {
+        let core = &self.core;
+        st.ready = 1;
         st.lifecycle = core.lifecycle() as u32;
         st.cycles = core.counters.cycles;
         st.lost_messages = core.lost_messages();
@@ -233,150 +420,23 @@ where
         st.clamped_cycles = core.counters.saturated_cycles + core.counters.slope_limited_cycles;
         st.faults = core.counters.faults;
         st.motion_time_s = core.motion_time_s();
-        st.latency = e2e.summary();
+        st.latency = self.e2e.summary();
         st.tracking_error_max = core.tracking_error_max;
         st.peak_torque = core.peak_torque;
         st.last_input_refusal = core
             .last_refusal
-            .map_or(microrobot_messages::RefusalReason::None, Refusal::reason)
-            as u32;
+            .map_or(RefusalReason::None, Refusal::reason) as u32;
         if let Some(f) = core.last_fault() {
             st.fault_code = f.code;
             st.fault_joint = f.joint.map_or(0, |j| j as u32 + 1);
         }
-    };
-    fill(&mut st, &core, &e2e);
-    status.publish(monotonic_ns(), &mut st);
-
-    let stale_ns = cfg.watchdog.stale_ns();
-    let mut faults_logged = 0;
-    // Set up: from here on the loop runs pinned and SCHED_FIFO.
-    microrobot_runtime::enter_cycle(cfg);
-    while !shutdown.is_requested() {
-        let ready = reactor.wait().context("epoll_wait")?;
-        if ready.contains(on_stop) || shutdown.is_requested() {
-            break;
-        }
-        let mut was_latched = core.safe_state_latched();
-        // Before any queued command can feed the watchdog: was this process stalled?
-        if let Some(gap) = core.on_wake(monotonic_ns()) {
-            tracing::warn!(
-                "actuator: stalled for {:.1} ms (longer than stale_ms = {} ms): the missed periods are not replayed; holding until a torque command answers a state published after the stall",
-                gap as f64 * 1e-6,
-                cfg.watchdog.stale_ms
-            );
-        }
-        if ready.contains(on_torque) {
-            let _ = torque_listener.try_wait(|_| {});
-            while let Ok(Some(sample)) = torque_sub.receive() {
-                let msg = *sample;
-                let publisher = sample.header().publisher_id().value();
-                drop(sample);
-                let now = monotonic_ns();
-                let verdict = core.accept_torque_from(&msg, publisher, now, || {
-                    provenance.check(&torque_svc, publisher)
-                        == microrobot_runtime::provenance::Origin::Pipeline
-                });
-                if verdict == Err(Refusal::Outsider) && !was_latched && core.safe_state_latched() {
-                    was_latched = true;
-                    tracing::error!(
-                        "actuator: a torque command from a process the supervisor did not start: refused, safe state latched; send a reset once the pipeline's own dynamics publishes again"
-                    );
-                }
-                if verdict.is_ok() {
-                    accepted = msg.header.seq;
-                    e2e.record(now.saturating_sub(msg.header.source_stamp_ns));
-                    if !cfg.lockstep && !phased {
-                        // Free-running: put the plant steps half a period after the
-                        // planner's ticks, so torque k is applied in the step that ends
-                        // before setpoint k+1 (the same one-period loop delay as lockstep).
-                        phased = true;
-                        let p = cfg.period_ns();
-                        let mut first = msg.header.source_stamp_ns + p / 2;
-                        while first <= now {
-                            first += p;
-                        }
-                        if timer.arm_absolute(first, p).is_ok() {
-                            let _ = timer.read_expirations();
-                            ticker =
-                                microrobot_runtime::Ticker::new(first, p, cfg.realtime.overrun);
-                        }
-                    }
-                    if !core.steps_on_timer() {
-                        core.check_watchdog(now);
-                        publish(core.step(monotonic_ns()));
-                    }
-                }
-            }
-        }
-        // Drained on every wake-up (see the planner: a new sender's sample can become
-        // visible after its notification).
-        {
-            if ready.contains(on_command) {
-                let _ = cmd_listener.try_wait(|_| {});
-            }
-            while let Ok(Some(sample)) = cmd_sub.receive() {
-                if CommandKind::from_wire(sample.kind) == Some(CommandKind::Reset)
-                    && core.reset(monotonic_ns())
-                {
-                    tracing::info!("actuator: reset, following torque commands again");
-                    // Lockstep: a torque taken while latched and not yet answered by a
-                    // timer step is answered now, or the loop (which ticks on states)
-                    // would wait for a state while this waits for a torque.
-                    if cfg.lockstep && accepted != u64::MAX && accepted != answered.get() {
-                        let now = monotonic_ns();
-                        core.check_watchdog(now);
-                        publish(core.step(now));
-                    }
-                }
-            }
-        }
-        if ready.contains(on_timer) {
-            ticker.on_expirations(timer.read_expirations());
-            // Hands the last state (history 1) to subscribers that joined since the last
-            // send: in lockstep nothing is sent until the first torque, and the planner
-            // starts from that state.
-            let _ = state_pub.update_connections();
-            let mut n = 0;
-            while let Some(tick) = ticker.next_tick() {
-                let now = monotonic_ns();
-                // Free-running, a period that ended more than `stale_ms` ago is not
-                // replayed (a stall): no torque that old is applied, and the plant does
-                // not run a burst of catch-up steps.
-                if !cfg.lockstep && now.saturating_sub(tick.ideal_ns) > stale_ns {
-                    continue;
-                }
-                core.check_watchdog(now);
-                if core.steps_on_timer() && n < 100 {
-                    publish(core.step(now));
-                    n += 1;
-                }
-            }
-        }
-        if core.safe_state_latched() && !was_latched {
-            tracing::warn!(
-                "actuator: no valid torque command for {} ms: safe state latched ({:?}); send a reset to resume",
-                cfg.watchdog.fault_ms,
-                cfg.watchdog.safe_state
-            );
-        }
-        if core.backend_faults() != faults_logged {
-            faults_logged = core.backend_faults();
-            if let Some(f) = core.last_fault() {
-                tracing::error!("actuator: backend fault: {f}; send a reset to acknowledge");
-            }
-        }
-        let now = monotonic_ns();
-        if status.due(now) {
-            fill(&mut st, &core, &e2e);
-            status.publish(now, &mut st);
-        }
     }
-    // Safe on the way out, however the stop was asked for (Ctrl-C, SIGTERM, the
-    // supervisor's death): brakes on, and the last state says so.
-    publish(core.shutdown(monotonic_ns()));
-    tracing::info!("actuator: stopped, backend inactive (drives disabled)");
-    fill(&mut st, &core, &e2e);
-    status.publish_final(&mut st);
-    Ok(())
+
+    /// Safe on the way out, however the stop was asked for (Ctrl-C, SIGTERM, the
+    /// supervisor's death): brakes on, and the last state says so.
+    fn finish(&mut self, ports: &Ports) {
+        let s = self.core.shutdown(monotonic_ns());
+        self.publish(ports, s);
+        tracing::info!("actuator: stopped, backend inactive (drives disabled)");
+    }
 }

@@ -21,22 +21,21 @@
 //! published after applying torque k−1); otherwise the newest state younger than
 //! `stale_ms`. Inputs are validated (finite, dof, increasing seq, fresh, within the
 //! joint limits) and refused ones are counted; no torque is published for them.
-//! The computation lives in [`DynamicsCore`] (no IPC).
+//! The computation lives in [`DynamicsCore`] (no IPC); the service's stage (its ports
+//! and wake-up) in `stage.rs`.
 
-use anyhow::Context as _;
+mod stage;
+
+pub use stage::run;
+
 use microrobot_messages::{
-    Header, JointSetpoint, JointState, LifecycleState, MAX_JOINTS, ServiceKind, ServiceRole,
-    ServiceStatus, TorqueCommand, monotonic_ns, open_event, open_publish_subscribe, state_flags,
-    torque_flags,
+    Header, JointSetpoint, JointState, MAX_JOINTS, TorqueCommand, state_flags, torque_flags,
 };
 use microrobot_model::{JointVector, ModelData, Robot, mass_matrix, nonlinear_effects, rnea};
 use microrobot_runtime::config::PipelineConfig;
-use microrobot_runtime::provenance::{Origin, Provenance};
-use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::{
     JointBounds, Refusal, SeqTracker, check_fresh, check_setpoint, check_state,
 };
-use microrobot_runtime::{BadConfig, Reactor, Shutdown, StatusPort, TimerFd, open_node};
 
 /// Cumulative counters of the dynamics service.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -357,179 +356,4 @@ impl DynamicsCore {
         }
         Ok(out)
     }
-}
-
-/// The dynamics service (`microrobot service dynamics`).
-pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
-    let robot = microrobot_model::Robot::from_file(&cfg.robot)
-        .map_err(|e| BadConfig(format!("robot file: {e}")))?;
-    let inst = cfg.instance.as_str();
-    let node = open_node(inst, ServiceRole::Dynamics)?;
-    let err = |what: &'static str| move |e: &dyn std::fmt::Debug| anyhow::anyhow!("{what}: {e:?}");
-
-    let sp_svc = open_publish_subscribe::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?;
-    let sp_sub = sp_svc
-        .subscriber_builder()
-        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
-        .history_request(0)
-        .create()
-        .map_err(|e| err("setpoint subscriber")(&e))?;
-    let sp_listener = open_event(&node, inst, ServiceKind::Setpoint)?
-        .listener_builder()
-        .create()
-        .map_err(|e| err("setpoint listener")(&e))?;
-    let st_svc = open_publish_subscribe::<JointState>(&node, inst, ServiceKind::State)?;
-    let st_sub = st_svc
-        .subscriber_builder()
-        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
-        .history_request(1)
-        .create()
-        .map_err(|e| err("state subscriber")(&e))?;
-    // Under a supervisor, a stream is taken over only by the supervisor's own processes.
-    let mut provenance = Provenance::from_env();
-    let tq_pub = open_publish_subscribe::<TorqueCommand>(&node, inst, ServiceKind::Torque)?
-        .publisher_builder()
-        .create()
-        .map_err(|e| err("torque publisher")(&e))?;
-    let tq_notifier = open_event(&node, inst, ServiceKind::Torque)?
-        .notifier_builder()
-        .create()
-        .map_err(|e| err("torque notifier")(&e))?;
-    let mut status = StatusPort::open(&node, inst, ServiceRole::Dynamics, cfg.status_period_ms)?;
-
-    let mut core = DynamicsCore::new(&robot, cfg);
-    let mut lat = LatencyHistogram::new();
-    let timer = TimerFd::new()?;
-    let sp_ns = status.period_ns();
-    timer.arm_absolute(monotonic_ns() + sp_ns, sp_ns)?;
-
-    let mut reactor = Reactor::new().context("epoll")?;
-    let on_setpoint = reactor.add(&sp_listener).context("epoll")?;
-    let on_timer = reactor.add(&timer).context("epoll")?;
-    let on_stop = reactor.add(shutdown).context("epoll")?;
-
-    let mut st = ServiceStatus {
-        ready: 1,
-        lifecycle: LifecycleState::Active as u32,
-        ..Default::default()
-    };
-    let fill = |st: &mut ServiceStatus,
-                core: &DynamicsCore,
-                lat: &LatencyHistogram,
-                stale_no_input: u64| {
-        st.cycles = core.counters.cycles;
-        st.lost_messages = core.lost_messages();
-        st.refused_messages = core.counters.refused;
-        st.stale_cycles = core.counters.stale_cycles + stale_no_input;
-        // Effort clamps and slew limits together (the torque flags tell them apart).
-        st.clamped_cycles = core.counters.clamped_cycles + core.counters.slew_limited_cycles;
-        st.latency = lat.summary();
-        st.peak_torque = core.peak_torque;
-        st.motion_time_s = core.last_tick().unwrap_or(0) as f64 / cfg.rate_hz;
-        st.last_input_refusal = core
-            .last_refusal
-            .map_or(microrobot_messages::RefusalReason::None, Refusal::reason)
-            as u32;
-    };
-    fill(&mut st, &core, &lat, 0);
-    status.publish(monotonic_ns(), &mut st);
-    let mut last_setpoint_ns = monotonic_ns();
-    let mut input_stale_periods = 0u64;
-
-    // Set up: from here on the loop runs pinned and SCHED_FIFO.
-    microrobot_runtime::enter_cycle(cfg);
-    while !shutdown.is_requested() {
-        let ready = reactor.wait().context("epoll_wait")?;
-        if ready.contains(on_stop) || shutdown.is_requested() {
-            break;
-        }
-        if ready.contains(on_setpoint) {
-            let _ = sp_listener.try_wait(|_| {});
-            while let Ok(Some(s)) = st_sub.receive() {
-                let msg = *s;
-                let publisher = s.header().publisher_id().value();
-                drop(s);
-                let _ = core.accept_state_from(&msg, publisher, monotonic_ns(), || {
-                    provenance.check(&st_svc, publisher) == Origin::Pipeline
-                });
-            }
-            // Once a stop is asked for, nothing new is computed (a torque from a state
-            // the shutdown cut off would differ from run to run).
-            while !shutdown.is_requested() {
-                let Ok(Some(s)) = sp_sub.receive() else {
-                    break;
-                };
-                let msg = *s;
-                let publisher = s.header().publisher_id().value();
-                drop(s);
-                if cfg.lockstep {
-                    // Setpoint k needs measured state k−1. Its delivery to this subscriber
-                    // can trail the planner's (the actuator may be preempted between
-                    // subscribers on a shared CPU, by the other tests' pipelines in CI):
-                    // wait for it, yielding, up to fault_ms (after which the actuator
-                    // has latched its safe state anyway) or until a stop is asked for.
-                    let give_up = monotonic_ns() + cfg.watchdog.fault_ns();
-                    while core.state_tick().is_none_or(|t| t + 1 < msg.header.tick)
-                        && monotonic_ns() < give_up
-                        && !shutdown.is_requested()
-                    {
-                        match st_sub.receive() {
-                            Ok(Some(s)) => {
-                                let m = *s;
-                                let p = s.header().publisher_id().value();
-                                drop(s);
-                                let _ = core.accept_state_from(&m, p, monotonic_ns(), || {
-                                    provenance.check(&st_svc, p) == Origin::Pipeline
-                                });
-                            }
-                            _ => std::thread::yield_now(),
-                        }
-                    }
-                    if shutdown.is_requested() {
-                        break;
-                    }
-                }
-                let now = monotonic_ns();
-                last_setpoint_ns = now;
-                let taken = core.compute_from(&msg, publisher, now, || {
-                    provenance.check(&sp_svc, publisher) == Origin::Pipeline
-                });
-                if let Ok(mut cmd) = taken {
-                    cmd.header.stamp_ns = monotonic_ns();
-                    if tq_pub.send_copy(cmd).is_ok() {
-                        let _ = tq_notifier.notify();
-                    }
-                    lat.record(
-                        cmd.header
-                            .stamp_ns
-                            .saturating_sub(msg.header.source_stamp_ns),
-                    );
-                }
-            }
-        }
-        if ready.contains(on_timer) {
-            let _ = timer.read_expirations();
-            // Keep the state queue short even when no setpoint arrives.
-            while let Ok(Some(s)) = st_sub.receive() {
-                let msg = *s;
-                let publisher = s.header().publisher_id().value();
-                drop(s);
-                let _ = core.accept_state_from(&msg, publisher, monotonic_ns(), || {
-                    provenance.check(&st_svc, publisher) == Origin::Pipeline
-                });
-            }
-            let now = monotonic_ns();
-            if !cfg.lockstep && now.saturating_sub(last_setpoint_ns) > cfg.watchdog.stale_ns() {
-                input_stale_periods += 1;
-            }
-        }
-        let now = monotonic_ns();
-        if status.due(now) {
-            fill(&mut st, &core, &lat, input_stale_periods);
-            status.publish(now, &mut st);
-        }
-    }
-    fill(&mut st, &core, &lat, input_stale_periods);
-    status.publish_final(&mut st);
-    Ok(())
 }

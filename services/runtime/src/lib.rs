@@ -7,10 +7,12 @@
 
 pub mod config;
 pub mod node;
+pub mod ports;
 pub mod provenance;
 pub mod reactor;
 pub mod rt;
 pub mod shutdown;
+pub mod stage;
 pub mod stats;
 pub mod status;
 pub mod timer;
@@ -27,8 +29,10 @@ pub use microrobot_messages::ServiceRole;
 // stays free of the model, the model free of the bus).
 const _: () = assert!(microrobot_messages::MAX_JOINTS == microrobot_model::MAX_JOINTS);
 pub use node::{InstanceInUse, open_node, waitset};
+pub use ports::{Inbox, Outbox, Received, Subscription};
 pub use reactor::{Reactor, Ready, Source};
 pub use shutdown::Shutdown;
+pub use stage::{Cycle, SetUp, Stage, serve};
 pub use status::StatusPort;
 pub use timer::{PeriodicClock, Ticker, TimerFd};
 pub use watchdog::{Freshness, Watchdog};

@@ -1,20 +1,16 @@
 //! The ~10 Hz status/heartbeat publisher every service owns: fills identity, stamp,
 //! CPU time and RSS, and publishes on the Status service (plus its event).
 
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
-use microrobot_messages::{
-    LifecycleState, ServiceKind, ServiceRole, ServiceStatus, monotonic_ns, open_event,
-    open_publish_subscribe,
-};
+use microrobot_messages::{LifecycleState, ServiceRole, ServiceStatus, monotonic_ns, topic};
+
+use crate::ports::Outbox;
 
 use crate::stats::{RssReader, cpu_time_ms};
 
 /// Publishes [`ServiceStatus`] at the configured period.
 pub struct StatusPort {
-    publisher: Publisher<ipc::Service, ServiceStatus, ()>,
-    notifier: Notifier<ipc::Service>,
+    out: Outbox<ServiceStatus>,
     rss: RssReader,
     period_ns: u64,
     next_due_ns: u64,
@@ -31,19 +27,8 @@ impl StatusPort {
         role: ServiceRole,
         period_ms: f64,
     ) -> anyhow::Result<Self> {
-        let svc = open_publish_subscribe::<ServiceStatus>(node, instance, ServiceKind::Status)?;
-        let publisher = svc
-            .publisher_builder()
-            .create()
-            .map_err(|e| anyhow::anyhow!("status publisher: {e:?}"))?;
-        let ev = open_event(node, instance, ServiceKind::Status)?;
-        let notifier = ev
-            .notifier_builder()
-            .create()
-            .map_err(|e| anyhow::anyhow!("status notifier: {e:?}"))?;
         Ok(Self {
-            publisher,
-            notifier,
+            out: Outbox::open(node, instance, topic::STATUS)?,
             rss: RssReader::new(),
             period_ns: crate::config::ms_to_ns(period_ms),
             next_due_ns: 0,
@@ -75,9 +60,7 @@ impl StatusPort {
         st.cpu_time_ms = cpu_time_ms();
         st.rss_kib = self.rss.rss_kib();
         self.next_due_ns = now_ns + self.period_ns;
-        let ok = self.publisher.send_copy(*st).is_ok();
-        let _ = self.notifier.notify();
-        ok
+        self.out.send(*st)
     }
 
     /// Publishes the final status (lifecycle Finalized).

@@ -1,0 +1,193 @@
+//! The dynamics service's stage: woken by each setpoint, it takes the newest measured
+//! states, computes the torque ([`DynamicsCore`]) and publishes it; a status-period timer
+//! keeps the state queue short and counts periods without setpoints.
+
+use microrobot_messages::{
+    JointSetpoint, JointState, LifecycleState, RefusalReason, ServiceRole, ServiceStatus,
+    TorqueCommand, monotonic_ns, topic,
+};
+use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::stats::LatencyHistogram;
+use microrobot_runtime::validate::Refusal;
+use microrobot_runtime::{
+    BadConfig, Cycle, Inbox, Outbox, Reactor, Ready, Shutdown, Source, Stage, Subscription,
+    TimerFd, serve,
+};
+
+use crate::DynamicsCore;
+
+/// The dynamics service (`microrobot service dynamics`).
+pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
+    let robot = microrobot_model::Robot::from_file(&cfg.robot)
+        .map_err(|e| BadConfig(format!("robot file: {e}")))?;
+    serve(cfg, shutdown, ServiceRole::Dynamics, |setup| {
+        let inst = setup.instance();
+        let ports = Ports {
+            setpoints: Inbox::open(setup.node, inst, topic::SETPOINT, Subscription::CYCLIC)?,
+            states: Inbox::open(
+                setup.node,
+                inst,
+                topic::STATE,
+                Subscription::CYCLIC.with_history(1).polled(),
+            )?,
+            torques: Outbox::open(setup.node, inst, topic::TORQUE)?,
+            timer: TimerFd::new()?,
+        };
+        let period = microrobot_runtime::config::ms_to_ns(cfg.status_period_ms);
+        ports.timer.arm_absolute(monotonic_ns() + period, period)?;
+        let stage = DynamicsStage {
+            core: DynamicsCore::new(&robot, cfg),
+            latency: LatencyHistogram::new(),
+            last_setpoint_ns: monotonic_ns(),
+            input_stale_periods: 0,
+            rate_hz: cfg.rate_hz,
+        };
+        Ok(Some((stage, ports)))
+    })
+}
+
+/// The ports of the dynamics stage.
+struct Ports {
+    setpoints: Inbox<JointSetpoint>,
+    states: Inbox<JointState>,
+    torques: Outbox<TorqueCommand>,
+    /// At the status period: drains states, counts periods without setpoints.
+    timer: TimerFd,
+}
+
+#[derive(Clone, Copy)]
+struct Sources {
+    setpoint: Source,
+    timer: Source,
+}
+
+struct DynamicsStage {
+    core: DynamicsCore,
+    /// Setpoint source stamp → torque published.
+    latency: LatencyHistogram,
+    last_setpoint_ns: u64,
+    /// Status periods that ended without a setpoint for longer than `stale_ms`.
+    input_stale_periods: u64,
+    rate_hz: f64,
+}
+
+impl DynamicsStage {
+    /// Takes every queued measured state (the newest valid one is used).
+    fn take_states(&mut self, states: &Inbox<JointState>) {
+        states.for_each(|r| {
+            let _ = self
+                .core
+                .accept_state_from(&r.msg, r.publisher, monotonic_ns(), || r.from_pipeline());
+        });
+    }
+
+    /// Lockstep: setpoint `tick` needs measured state `tick − 1`. Its delivery to this
+    /// subscriber can trail the planner's (the actuator may be preempted between
+    /// subscribers on a shared CPU): wait for it, yielding, up to `fault_ms` (after which
+    /// the actuator has latched its safe state anyway) or until a stop is asked for.
+    fn await_state_for(&mut self, tick: u64, states: &Inbox<JointState>, cycle: &Cycle<'_>) {
+        let give_up = monotonic_ns() + cycle.cfg.watchdog.fault_ns();
+        while self.core.state_tick().is_none_or(|t| t + 1 < tick)
+            && monotonic_ns() < give_up
+            && !cycle.shutdown.is_requested()
+        {
+            match states.next() {
+                Some(r) => {
+                    let _ =
+                        self.core
+                            .accept_state_from(&r.msg, r.publisher, monotonic_ns(), || {
+                                r.from_pipeline()
+                            });
+                }
+                None => std::thread::yield_now(),
+            }
+        }
+    }
+}
+
+impl Stage for DynamicsStage {
+    type Ports = Ports;
+    type Sources = Sources;
+
+    fn register<'p>(ports: &'p Ports, reactor: &mut Reactor<'p>) -> std::io::Result<Sources> {
+        let listener = ports
+            .setpoints
+            .listener()
+            .ok_or_else(|| std::io::Error::other("the setpoint inbox has no listener"))?;
+        Ok(Sources {
+            setpoint: reactor.add(listener)?,
+            timer: reactor.add(&ports.timer)?,
+        })
+    }
+
+    fn wake(
+        &mut self,
+        ports: &Ports,
+        on: Sources,
+        ready: Ready,
+        cycle: &mut Cycle<'_>,
+    ) -> anyhow::Result<()> {
+        let cfg = cycle.cfg;
+        if ready.contains(on.setpoint) {
+            ports.setpoints.clear_events();
+            self.take_states(&ports.states);
+            // Once a stop is asked for, nothing new is computed (a torque from a state
+            // the shutdown cut off would differ from run to run).
+            while !cycle.shutdown.is_requested() {
+                let Some(r) = ports.setpoints.next() else {
+                    break;
+                };
+                let sp = r.msg;
+                if cfg.lockstep {
+                    self.await_state_for(sp.header.tick, &ports.states, cycle);
+                    if cycle.shutdown.is_requested() {
+                        break;
+                    }
+                }
+                let now = monotonic_ns();
+                self.last_setpoint_ns = now;
+                let taken = self
+                    .core
+                    .compute_from(&sp, r.publisher, now, || r.from_pipeline());
+                if let Ok(mut cmd) = taken {
+                    cmd.header.stamp_ns = monotonic_ns();
+                    ports.torques.send(cmd);
+                    self.latency.record(
+                        cmd.header
+                            .stamp_ns
+                            .saturating_sub(sp.header.source_stamp_ns),
+                    );
+                }
+            }
+        }
+        if ready.contains(on.timer) {
+            let _ = ports.timer.read_expirations();
+            // Keep the state queue short even when no setpoint arrives.
+            self.take_states(&ports.states);
+            let now = monotonic_ns();
+            if !cfg.lockstep && now.saturating_sub(self.last_setpoint_ns) > cfg.watchdog.stale_ns()
+            {
+                self.input_stale_periods += 1;
+            }
+        }
+        Ok(())
+    }
+
+    fn report(&self, st: &mut ServiceStatus) {
+        let core = &self.core;
+        st.ready = 1;
+        st.lifecycle = LifecycleState::Active as u32;
+        st.cycles = core.counters.cycles;
+        st.lost_messages = core.lost_messages();
+        st.refused_messages = core.counters.refused;
+        st.stale_cycles = core.counters.stale_cycles + self.input_stale_periods;
+        // Effort clamps and slew limits together (the torque flags tell them apart).
+        st.clamped_cycles = core.counters.clamped_cycles + core.counters.slew_limited_cycles;
+        st.latency = self.latency.summary();
+        st.peak_torque = core.peak_torque;
+        st.motion_time_s = core.last_tick().unwrap_or(0) as f64 / self.rate_hz;
+        st.last_input_refusal = core
+            .last_refusal
+            .map_or(RefusalReason::None, Refusal::reason) as u32;
+    }
+}

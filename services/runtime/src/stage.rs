@@ -1,0 +1,161 @@
+//! The stage runner: one loop for every service. A service is its pure core plus a
+//! [`Stage`]: what it does when one of its ports or timers wakes it, and what it reports
+//! in its status. [`serve`] owns the rest, the same for all: the node, the status port
+//! and its period, the set-up before the cycle, the reactor and the shutdown event,
+//! [`enter_cycle`](crate::enter_cycle), the final status and the exit.
+//!
+//! The loop is ros2_control's `read(); update(); write(); sleep_until` with the wait
+//! first: the stage sleeps in one `epoll_wait` over its event listeners and timers
+//! ([`crate::Reactor`]) and does all its work in [`Stage::wake`].
+
+use iceoryx2::prelude::*;
+use microrobot_messages::{ServiceRole, ServiceStatus, monotonic_ns};
+
+use crate::{PipelineConfig, Reactor, Ready, Shutdown, StatusPort, open_node};
+
+/// What a service does in its cycle.
+pub trait Stage {
+    /// The ports and timers the stage sleeps on and works with ([`crate::ports`]). The
+    /// runner owns them and lends them to the reactor and to every wake-up (the reactor
+    /// borrows each file descriptor for as long as it can report it).
+    type Ports;
+    /// Which of the ports' sources woke the stage: the reactor's handles, from
+    /// [`Stage::register`].
+    type Sources: Copy;
+
+    /// Registers the ports' listeners and timers with the reactor.
+    fn register<'p>(
+        ports: &'p Self::Ports,
+        reactor: &mut Reactor<'p>,
+    ) -> std::io::Result<Self::Sources>;
+
+    /// One wake-up: `ready` says which of `on` fired. The stage reads its own timers
+    /// (it may re-arm them) and drains its inboxes.
+    fn wake(
+        &mut self,
+        ports: &Self::Ports,
+        on: Self::Sources,
+        ready: Ready,
+        cycle: &mut Cycle<'_>,
+    ) -> anyhow::Result<()>;
+
+    /// Writes the stage's counters into its status (the runner stamps and publishes it
+    /// at the status period, when asked to, and once more at the end).
+    fn report(&self, status: &mut ServiceStatus);
+
+    /// The last word on the way out (SIGINT/SIGTERM or the supervisor's death), before
+    /// the final status: e.g. the actuator's last, safe state.
+    fn finish(&mut self, _ports: &Self::Ports) {}
+}
+
+/// What a wake-up may use besides its ports.
+pub struct Cycle<'a> {
+    /// The resolved pipeline config.
+    pub cfg: &'a PipelineConfig,
+    /// The stop request (a long wake-up checks it).
+    pub shutdown: &'a Shutdown,
+    /// The status the runner publishes (a stage writes what [`Stage::report`] cannot
+    /// know afterwards, e.g. the verdict of a command it just took).
+    pub status: &'a mut ServiceStatus,
+    publish_status: bool,
+}
+
+impl Cycle<'_> {
+    /// Publishes the status at the end of this wake-up rather than at the next period
+    /// (a command's sender waits for its verdict).
+    pub fn publish_status_now(&mut self) {
+        self.publish_status = true;
+    }
+}
+
+/// What the set-up before the cycle may use: the node to open ports on, the config,
+/// the stop request and the status port (a stage that waits for something before its
+/// cycle says so in its status meanwhile).
+pub struct SetUp<'a> {
+    /// The service's iceoryx2 node.
+    pub node: &'a Node<ipc::Service>,
+    /// The resolved pipeline config.
+    pub cfg: &'a PipelineConfig,
+    /// The stop request: a set-up that waits returns `Ok(None)` once it is asked for.
+    pub shutdown: &'a Shutdown,
+    status_port: StatusPort,
+    status: ServiceStatus,
+}
+
+impl<'a> SetUp<'a> {
+    /// The pipeline instance.
+    pub fn instance(&self) -> &'a str {
+        &self.cfg.instance
+    }
+
+    /// Publishes a status written by `fill` now (e.g. `Inactive` while waiting).
+    pub fn publish_status(&mut self, fill: impl FnOnce(&mut ServiceStatus)) {
+        fill(&mut self.status);
+        self.status_port.publish(monotonic_ns(), &mut self.status);
+    }
+}
+
+/// Runs the service `role` until `shutdown`: opens its node and status port, calls
+/// `set_up` (which opens the ports, waits for what the stage needs and builds it;
+/// `Ok(None)` when a stop came first), publishes the first status, enters the cycle
+/// (CPU pinning and SCHED_FIFO) and wakes the stage on its sources until the stop; then
+/// [`Stage::finish`] and the final status.
+pub fn serve<S: Stage>(
+    cfg: &PipelineConfig,
+    shutdown: &Shutdown,
+    role: ServiceRole,
+    set_up: impl FnOnce(&mut SetUp<'_>) -> anyhow::Result<Option<(S, S::Ports)>>,
+) -> anyhow::Result<()> {
+    use anyhow::Context as _;
+    let node = open_node(&cfg.instance, role)?;
+    let status_port = StatusPort::open(&node, &cfg.instance, role, cfg.status_period_ms)?;
+    let mut setup = SetUp {
+        node: &node,
+        cfg,
+        shutdown,
+        status_port,
+        status: ServiceStatus::default(),
+    };
+    let built = set_up(&mut setup)?;
+    let SetUp {
+        mut status_port,
+        mut status,
+        ..
+    } = setup;
+    let Some((mut stage, ports)) = built else {
+        status_port.publish_final(&mut status);
+        return Ok(());
+    };
+
+    let mut reactor = Reactor::new().context("epoll")?;
+    let on = S::register(&ports, &mut reactor).context("epoll")?;
+    let on_stop = reactor.add(shutdown).context("epoll")?;
+    stage.report(&mut status);
+    status_port.publish(monotonic_ns(), &mut status);
+
+    // Set up: from here on the loop runs pinned and SCHED_FIFO.
+    crate::enter_cycle(cfg);
+    while !shutdown.is_requested() {
+        let ready = reactor.wait().context("epoll_wait")?;
+        if ready.contains(on_stop) || shutdown.is_requested() {
+            break;
+        }
+        let mut cycle = Cycle {
+            cfg,
+            shutdown,
+            status: &mut status,
+            publish_status: false,
+        };
+        stage.wake(&ports, on, ready, &mut cycle)?;
+        let asked = cycle.publish_status;
+        let now = monotonic_ns();
+        if asked || status_port.due(now) {
+            stage.report(&mut status);
+            status_port.publish(now, &mut status);
+        }
+    }
+    stage.finish(&ports);
+    stage.report(&mut status);
+    status_port.publish_final(&mut status);
+    Ok(())
+}
