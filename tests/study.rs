@@ -303,3 +303,180 @@ fn a_bad_robot_or_program_file_is_an_error_naming_it() {
         .expect("error");
     assert!(format!("{e:#}").contains("bad-program.toml"), "{e:#}");
 }
+
+/// The spherical arm (revolute, revolute, prismatic) with a program in each joint's unit.
+const RRP: &str = r#"
+[program]
+name = "rrp"
+dof = 3
+
+[[segment]]
+q_deg_mm = [-60.0, 30.0, 120.0]
+
+[[segment]]
+q_deg_mm = [60.0, 120.0, 280.0]
+duration_s = 4.0
+"#;
+
+fn rrp_robot_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("config/robots/spherical-rrp.toml")
+}
+
+#[test]
+fn a_prismatic_joint_is_reported_in_mm_and_n_and_seed_claims_are_not_checked() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let program = dir.path().join("rrp.toml");
+    std::fs::write(&program, RRP).expect("program");
+    let out = dir.path().join("study");
+    let mut args = quick_args(&rrp_robot_path(), &program, &out);
+    args.quintic_acc_deg_s2 = None;
+    args.no_figures = true;
+    args.workspace_samples = 2000;
+    let st = study::run(args).expect("study runs");
+    let s = summary(&out);
+
+    // The program's mm were converted once: the boom goes from 0.12 m to 0.28 m.
+    assert!((st.motion.start[2] - 0.12).abs() < 1e-12);
+    assert!((st.motion.target[2] - 0.28).abs() < 1e-12);
+
+    // CSV headers carry the joint type's SI unit.
+    let csv = std::fs::read_to_string(out.join("data/cases/soft_5s.csv")).expect("case csv");
+    let header: Vec<&str> = csv.lines().next().expect("header").split(',').collect();
+    for col in [
+        "q1_rad",
+        "q3_m",
+        "qd3_m_s",
+        "qdd3_m_s2",
+        "tau_nm_1",
+        "tau_n_3",
+    ] {
+        assert!(header.contains(&col), "{col} in {header:?}");
+    }
+    assert!(
+        !header
+            .iter()
+            .any(|h| h.starts_with("q3_rad") || *h == "tau_nm_3")
+    );
+    let comparison = std::fs::read_to_string(out.join("data/comparison.csv")).expect("csv");
+    assert!(
+        comparison.starts_with("method,tf_s,duration_s,peak_tau_nm_1,peak_tau_nm_2,peak_tau_n_3,")
+    );
+
+    // The Jacobian column of the boom is unscaled m/m: a unit vector along the boom.
+    let jac = std::fs::read_to_string(out.join("data/jacobian_sweeps.csv")).expect("csv");
+    let mut lines = jac.lines();
+    let head: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).expect(name);
+    let (dx, dy, dz) = (col("dpx_m_per_m"), col("dpy_m_per_m"), col("dpz_m_per_m"));
+    let mut boom_rows = 0;
+    for l in lines {
+        let c: Vec<&str> = l.split(',').collect();
+        if c[0] != "3" {
+            continue;
+        }
+        let v = |i: usize| c[i].parse::<f64>().expect("number");
+        let norm = (v(dx).powi(2) + v(dy).powi(2) + v(dz).powi(2)).sqrt();
+        assert!((norm - 1.0).abs() < 1e-9, "boom column norm {norm}: {l}");
+        boom_rows += 1;
+    }
+    assert!(boom_rows > 0);
+
+    // Tables: the boom in mm and N, its Jacobian in m/m, never mm/mm.
+    let report = std::fs::read_to_string(out.join("report.md")).expect("report");
+    assert!(
+        report.contains("| 3 | mm | 120.000 | 280.000 |"),
+        "Table 4 row of the boom"
+    );
+    assert!(report.contains("200.000 N |"), "force limit in N");
+    assert!(report.contains("peak |τ| j3 (N)") && report.contains("peak |τ| j1 (N·m)"));
+    assert!(report.contains("j3 (mm/s)"));
+    assert!(report.contains("m/m") && !report.contains("mm/mm"));
+
+    // JSON: per-joint keys in the joint's unit; no all-revolute arrays.
+    let soft = case(&s, "soft", 5.0);
+    let boom = &soft["joints"][2];
+    assert_eq!(boom["kind"], "prismatic");
+    assert!(
+        boom["peak_velocity_m_s"].is_number() && boom["peak_tau_n"].is_number(),
+        "{boom}"
+    );
+    assert!(boom.get("peak_velocity_rad_s").is_none() && boom.get("peak_tau_nm").is_none());
+    assert!(soft.get("peak_torque_nm").is_none());
+
+    // Not the seed arm: nothing confirmed or refuted, every claim not applicable.
+    assert_eq!(s["seed_arm"], false);
+    for v in s["verdicts"].as_array().expect("verdicts") {
+        assert_eq!(v["status"], "not_applicable", "{v}");
+        assert!(v["holds"].is_null(), "{v}");
+    }
+    let verdicts = report
+        .split("## 7.")
+        .nth(1)
+        .and_then(|t| t.split("## 8.").next())
+        .expect("verdict section")
+        .to_lowercase();
+    for word in ["confirmed", "pass", "holds", "refuted"] {
+        assert!(!verdicts.contains(word), "{word} in {verdicts}");
+    }
+    assert!(report.contains("not the seed arm"));
+}
+
+#[test]
+fn the_seed_arm_is_recognised_by_its_parameters_not_its_file_name() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let program = dir.path().join("seed-table4.toml");
+    std::fs::write(&program, TABLE4).expect("program");
+    let text = std::fs::read_to_string(seed_robot_path()).expect("seed robot");
+    let run = |robot_text: &str, file: &str| {
+        let robot = dir.path().join(file);
+        std::fs::write(&robot, robot_text).expect("robot");
+        let out = dir.path().join(format!("study-{file}"));
+        let mut args = quick_args(&robot, &program, &out);
+        args.no_figures = true;
+        args.workspace_samples = 2000;
+        study::run(args).expect("study runs");
+        summary(&out)
+    };
+    // Renamed, same parameters: still the seed arm, claims checked.
+    let s = run(&text, "my-arm.toml");
+    assert_eq!(s["seed_arm"], true);
+    assert!(
+        s["verdicts"]
+            .as_array()
+            .expect("verdicts")
+            .iter()
+            .all(|v| v["holds"].is_boolean())
+    );
+    // Same name, a longer link: another arm, claims not checked.
+    let longer = text.replacen("a_mm = 50.0", "a_mm = 60.0", 1);
+    assert_ne!(longer, text, "seed robot file changed shape");
+    let s = run(&longer, "seed-arm.toml");
+    assert_eq!(s["seed_arm"], false);
+    assert!(
+        s["verdicts"]
+            .as_array()
+            .expect("verdicts")
+            .iter()
+            .all(|v| v["status"] == "not_applicable")
+    );
+}
+
+#[test]
+fn a_unit_that_does_not_fit_the_joint_type_names_file_key_and_joint() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let program = dir.path().join("rrp-in-degrees.toml");
+    std::fs::write(&program, RRP.replace("q_deg_mm", "q_deg")).expect("program");
+    let out = dir.path().join("study");
+    let e = study::run(quick_args(&rrp_robot_path(), &program, &out))
+        .err()
+        .expect("a length given in degrees");
+    let e = format!("{e:#}");
+    for needle in [
+        "rrp-in-degrees.toml",
+        "q_deg",
+        "joint 3 (`boom`)",
+        "prismatic",
+    ] {
+        assert!(e.contains(needle), "{needle} in {e}");
+    }
+}

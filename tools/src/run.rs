@@ -1199,6 +1199,16 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
             feedback: cfg.dynamics.feedback,
             wall_time_s: started.elapsed().as_secs_f64(),
             dof,
+            joints: robot
+                .joints()
+                .iter()
+                .map(|j| {
+                    (
+                        j.name.clone(),
+                        j.kind == microrobot_model::JointKind::Prismatic,
+                    )
+                })
+                .collect(),
             run_dir: run_dir.display().to_string(),
         },
         &totals,

@@ -18,21 +18,14 @@ pub struct ProgramRunner {
 }
 
 impl ProgramRunner {
-    /// Loads and checks a program file for `robot` (the joint count must match).
+    /// Loads and checks a program file for `robot` (the joint count and every unit's
+    /// joint type must match).
     pub fn from_file(path: &Path, robot: &Robot) -> Result<Self, String> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
-        let program = Program::from_toml_str(&text, &path.display().to_string())
-            .map_err(|e| e.to_string())?;
-        if program.dof != robot.dof() {
-            return Err(format!(
-                "{}: program.dof = {} but the robot `{}` has {} joints",
-                path.display(),
-                program.dof,
-                robot.name(),
-                robot.dof()
-            ));
-        }
+        let kinds: Vec<_> = robot.joints().iter().map(|j| j.kind).collect();
+        let program = Program::from_toml_str_for(&text, &path.display().to_string(), &kinds)
+            .map_err(|e| format!("{e} (robot `{}`)", robot.name()))?;
         Ok(Self {
             program,
             runner: None,

@@ -7,6 +7,7 @@
 //! profile takes a start acceleration (quintic, soft motion). [`ProgramRunner`] steps
 //! the planned segments per cycle without allocating.
 
+use microrobot_model::JointKind;
 use serde::Deserialize;
 
 use crate::{
@@ -116,7 +117,7 @@ pub enum End {
 /// Where a segment goes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Target {
-    /// Joint positions (rad).
+    /// Joint positions (rad for revolute, m for prismatic joints).
     Joint(JointVector),
     /// Tool pose, through a [`CartesianSolver`].
     Cartesian(CartesianPose),
@@ -214,6 +215,10 @@ struct SegmentToml {
     name: Option<String>,
     q_deg: Option<Vec<f64>>,
     q_rad: Option<Vec<f64>>,
+    q_mm: Option<Vec<f64>>,
+    q_m: Option<Vec<f64>>,
+    q_deg_mm: Option<Vec<f64>>,
+    q_rad_m: Option<Vec<f64>>,
     pose: Option<PoseToml>,
     profile: Option<ProfileKind>,
     duration_s: Option<f64>,
@@ -222,9 +227,49 @@ struct SegmentToml {
     blend_s: Option<f64>,
 }
 
+/// A joint-target key: its name and its scale to SI for a revolute and a prismatic
+/// joint (`None`: the key's unit does not fit that joint type).
+type TargetKey = (&'static str, Option<f64>, Option<f64>);
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// Joint-target keys: one unit for every joint (`q_deg`, `q_rad`: revolute only;
+/// `q_mm`, `q_m`: prismatic only) or each joint in its type's unit (`q_deg_mm`,
+/// `q_rad_m`).
+const TARGET_KEYS: [TargetKey; 6] = [
+    ("q_deg", Some(DEG), None),
+    ("q_rad", Some(1.0), None),
+    ("q_mm", None, Some(1e-3)),
+    ("q_m", None, Some(1.0)),
+    ("q_deg_mm", Some(DEG), Some(1e-3)),
+    ("q_rad_m", Some(1.0), Some(1.0)),
+];
+
 impl Program {
     /// Parses a program; `origin` names the source in errors (e.g. the file path).
+    /// Without the robot's joint types, `q_deg`/`q_rad` are read as angles and
+    /// `q_mm`/`q_m` as lengths, and `q_deg_mm` is refused; prefer
+    /// [`Program::from_toml_str_for`].
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Program, ProgramError> {
+        Self::parse(text, origin, None)
+    }
+
+    /// Parses a program for a robot whose joints have the types `kinds`: every unit
+    /// must fit its joint's type (angles for revolute joints, lengths for prismatic
+    /// ones); an error names the file, the segment, the key and the joint.
+    pub fn from_toml_str_for(
+        text: &str,
+        origin: &str,
+        kinds: &[JointKind],
+    ) -> Result<Program, ProgramError> {
+        Self::parse(text, origin, Some(kinds))
+    }
+
+    fn parse(
+        text: &str,
+        origin: &str,
+        kinds: Option<&[JointKind]>,
+    ) -> Result<Program, ProgramError> {
         let file: FileToml = toml::from_str(text).map_err(|e| ProgramError::Parse {
             origin: origin.to_string(),
             message: e.to_string(),
@@ -266,7 +311,33 @@ impl Program {
             }
             Ok(out)
         };
-        let deg = std::f64::consts::PI / 180.0;
+        if let Some(k) = kinds
+            && k.len() != dof
+        {
+            return Err(bad(
+                0,
+                "program.dof",
+                format!("is {dof} but the robot has {} joints", k.len()),
+            ));
+        }
+        let deg = DEG;
+        // Keys in degrees (limits, cruise velocity) are for revolute joints only.
+        let angles_only = |segment: usize, key: &'static str| match kinds
+            .and_then(|k| k.iter().position(|k| *k == JointKind::Prismatic))
+        {
+            Some(i) => Err(bad(
+                segment,
+                key,
+                format!(
+                    "joint {} is prismatic but this key is in degrees (a program has no length form of it yet: leave it out to use the robot's limits)",
+                    i + 1
+                ),
+            )),
+            None => Ok(()),
+        };
+        if file.limits.is_some() {
+            angles_only(0, "limits")?;
+        }
         let limits = match &file.limits {
             None => None,
             Some(l) => {
@@ -302,10 +373,56 @@ impl Program {
             let joint = |key: &'static str, xs: &Vec<f64>, scale: f64| {
                 vector(k, key, &Values::Many(xs.clone()), scale)
             };
-            let target = match (&s.q_deg, &s.q_rad, &s.pose) {
-                (Some(q), None, None) => Target::Joint(joint("q_deg", q, deg)?),
-                (None, Some(q), None) => Target::Joint(joint("q_rad", q, 1.0)?),
-                (None, None, Some(p)) => {
+            let given = [&s.q_deg, &s.q_rad, &s.q_mm, &s.q_m, &s.q_deg_mm, &s.q_rad_m];
+            let joint_keys: Vec<(TargetKey, &Vec<f64>)> = TARGET_KEYS
+                .into_iter()
+                .zip(given)
+                .filter_map(|(k, v)| v.as_ref().map(|v| (k, v)))
+                .collect();
+            let target = match (joint_keys.as_slice(), &s.pose) {
+                ([((key, rev, pri), q)], None) => {
+                    let mut out = joint(key, q, 1.0)?;
+                    for i in 0..dof {
+                        let kind = match kinds {
+                            Some(k) => k[i],
+                            None if rev.is_some() => JointKind::Revolute,
+                            None => JointKind::Prismatic,
+                        };
+                        let scale = match kind {
+                            JointKind::Revolute => *rev,
+                            JointKind::Prismatic => *pri,
+                        };
+                        let Some(scale) = scale else {
+                            let (is, fits) = match kind {
+                                JointKind::Revolute => {
+                                    ("revolute", "an angle: q_deg, q_rad, or q_deg_mm")
+                                }
+                                JointKind::Prismatic => {
+                                    ("prismatic", "a length: q_mm, q_m, or q_deg_mm")
+                                }
+                            };
+                            return Err(bad(
+                                k,
+                                key,
+                                format!(
+                                    "joint {} is {is}: its target is {fits} (each joint in its type's unit)",
+                                    i + 1
+                                ),
+                            ));
+                        };
+                        if kinds.is_none() && rev.is_some() && pri.is_some() && rev != pri {
+                            return Err(bad(
+                                k,
+                                key,
+                                "needs the robot's joint types: load with Program::from_toml_str_for"
+                                    .into(),
+                            ));
+                        }
+                        out[i] *= scale;
+                    }
+                    Target::Joint(out)
+                }
+                ([], Some(p)) => {
                     if p.xyz_mm.iter().chain(&p.rpy_deg).any(|x| !x.is_finite()) {
                         return Err(bad(k, "pose", "values must be finite".into()));
                     }
@@ -318,7 +435,8 @@ impl Program {
                     return Err(bad(
                         k,
                         "q_deg",
-                        "give exactly one of q_deg, q_rad, pose".into(),
+                        "give exactly one of q_deg, q_rad, q_mm, q_m, q_deg_mm, q_rad_m, pose"
+                            .into(),
                     ));
                 }
             };
@@ -337,7 +455,10 @@ impl Program {
             }
             let cruise_velocity = match (&s.cruise_vel_deg_s, profile) {
                 (None, _) => None,
-                (Some(v), ProfileKind::Lspb) => Some(vector(k, "cruise_vel_deg_s", v, deg)?),
+                (Some(v), ProfileKind::Lspb) => {
+                    angles_only(k, "cruise_vel_deg_s")?;
+                    Some(vector(k, "cruise_vel_deg_s", v, deg)?)
+                }
                 (Some(_), _) => return Err(bad(k, "cruise_vel_deg_s", "only for lspb".into())),
             };
             let end = match s.end.unwrap_or(EndToml::Stop) {

@@ -246,3 +246,55 @@ fn cartesian_targets_go_through_the_solver() {
         .expect_err("unreachable");
     assert!(matches!(e, ProgramError::Ik { segment: 0, .. }), "{e}");
 }
+
+#[test]
+fn units_follow_the_joint_type_and_a_mismatch_names_key_and_joint() {
+    use microrobot_model::JointKind::{Prismatic, Revolute};
+    use microrobot_trajectory::program::Target;
+    let rrp = [Revolute, Revolute, Prismatic];
+    let seg = |key: &str| {
+        format!("[program]\nname = \"u\"\ndof = 3\n[[segment]]\n{key} = [90.0, 45.0, 200.0]\n")
+    };
+    let joint = |p: &Program| match p.segments[0].target {
+        Target::Joint(q) => q,
+        _ => panic!("joint target"),
+    };
+    // Each joint in its type's unit, converted once at load.
+    let p = Program::from_toml_str_for(&seg("q_deg_mm"), "rrp.toml", &rrp).expect("loads");
+    let q = joint(&p);
+    assert_close(q[0], 90f64.to_radians(), 1e-15, "deg");
+    assert_close(q[2], 0.2, 1e-15, "mm");
+    let p = Program::from_toml_str_for(&seg("q_rad_m"), "rrp.toml", &rrp).expect("loads");
+    assert_close(joint(&p)[2], 200.0, 1e-12, "m");
+    // An angle key on a prismatic joint, a length key on a revolute one.
+    for (key, joint_no, wants) in [("q_deg", 3, "length"), ("q_mm", 1, "angle")] {
+        let e = Program::from_toml_str_for(&seg(key), "rrp.toml", &rrp)
+            .expect_err("unit does not fit")
+            .to_string();
+        assert!(
+            e.contains("rrp.toml")
+                && e.contains(&format!("{key}:"))
+                && e.contains(&format!("joint {joint_no}"))
+                && e.contains(wants),
+            "{e}"
+        );
+    }
+    // An all-prismatic target in mm.
+    let text = "[program]\nname = \"p\"\ndof = 1\n[[segment]]\nq_mm = [150.0]\n";
+    let p = Program::from_toml_str_for(text, "p.toml", &[Prismatic]).expect("loads");
+    assert_close(joint(&p)[0], 0.15, 1e-15, "mm");
+    // Limits in degrees do not fit a prismatic joint.
+    let limited = format!(
+        "{}[limits]\nvel_deg_s = 10.0\nacc_deg_s2 = 10.0\njerk_deg_s3 = 10.0\n",
+        seg("q_deg_mm")
+    );
+    let e = Program::from_toml_str_for(&limited, "rrp.toml", &rrp)
+        .expect_err("degree limits on a prismatic joint")
+        .to_string();
+    assert!(e.contains("limits") && e.contains("joint 3"), "{e}");
+    // The joint count must match the robot's.
+    let e = Program::from_toml_str_for(&seg("q_deg_mm"), "rrp.toml", &rrp[..2])
+        .expect_err("dof")
+        .to_string();
+    assert!(e.contains("program.dof"), "{e}");
+}

@@ -3,7 +3,7 @@
 //! parts, and the per-case statistics of the comparison table.
 
 use anyhow::{Result, anyhow};
-use microrobot_model::{ModelData, Robot, coriolis_torque, gravity_torque, rnea};
+use microrobot_model::{JointKind, ModelData, Robot, coriolis_torque, gravity_torque, rnea};
 use microrobot_trajectory::{
     JointVector, KinematicLimits, MotionRequest, MotionState, Peaks, Profile, Trajectory,
 };
@@ -150,7 +150,7 @@ pub struct Case {
     pub duration: f64,
     /// Sample times (s), uniform on [0, duration].
     pub t: Vec<f64>,
-    /// Positions, velocities, accelerations, jerks (SI).
+    /// Positions, velocities, accelerations, jerks (SI: rad… or m… per joint type).
     pub q: Vec<JointVector>,
     /// Velocities.
     pub qd: Vec<JointVector>,
@@ -158,7 +158,7 @@ pub struct Case {
     pub qdd: Vec<JointVector>,
     /// Jerks.
     pub jerk: Vec<JointVector>,
-    /// Joint torques by inverse dynamics (N·m).
+    /// Joint torques (N·m) or forces (N) by inverse dynamics.
     pub tau: Vec<JointVector>,
     /// Exact kinematic peaks from the library.
     pub peaks: Peaks,
@@ -169,24 +169,23 @@ pub struct Case {
 /// The comparison-table row of one case.
 #[derive(Debug, Clone, Default)]
 pub struct CaseStats {
-    /// max |τ| per joint (N·m).
+    /// max |τ| per joint (N·m, or N for a prismatic joint).
     pub peak_torque: JointVector,
-    /// RMS τ per joint over [0, duration] (N·m).
+    /// RMS τ per joint over [0, duration] (N·m or N).
     pub rms_torque: JointVector,
-    /// max |jerk| over joints inside pieces (rad/s³).
-    pub peak_jerk: f64,
-    /// Largest jump of acceleration (rad/s²), including the jumps from and to rest
-    /// at the ends (an unbounded jerk).
-    pub acc_jump: f64,
+    /// Largest jump of acceleration per joint (rad/s² or m/s²; 0 below numerical
+    /// noise), including the jumps from and to rest at the ends (an unbounded jerk).
+    pub acc_jump: JointVector,
     /// Σ_i ∫ |τ_i q̇_i| dt (J).
     pub energy: f64,
     /// Limits exceeded.
     pub violations: Vec<Violation>,
     /// Torque-rate sign changes per joint (the seed's "shootings").
     pub shootings: Vec<usize>,
-    /// RMS over time of the norm over joints of the inertial (incl. friction),
-    /// Coriolis/centrifugal and gravity torques (N·m).
-    pub rms_parts: [f64; 3],
+    /// RMS over time of the norm over the revolute joints (`[0]`, N·m) and over the
+    /// prismatic joints (`[1]`, N) of the inertial (incl. friction),
+    /// Coriolis/centrifugal and gravity parts of the effort.
+    pub rms_parts: [[f64; 3]; 2],
     /// Velocity sign changes of each joint (0 = monotonic motion).
     pub reversals: Vec<usize>,
 }
@@ -220,7 +219,13 @@ pub fn run_case(
         peaks: traj.peaks(),
         stats: CaseStats::default(),
     };
-    let mut parts_sq = [0.0; 3];
+    let mut parts_sq = [[0.0; 3]; 2];
+    let of_kind = |kind: JointKind, v: &JointVector| {
+        (0..dof)
+            .filter(|&i| robot.joints()[i].kind == kind)
+            .map(|i| v[i] * v[i])
+            .sum::<f64>()
+    };
     for k in 0..=n {
         let t = duration * k as f64 / n as f64;
         let s = traj.sample(t);
@@ -229,8 +234,13 @@ pub fn run_case(
         let cor = coriolis_torque(robot, &mut data, &s.q, &s.qd);
         let inertial = tau - g - cor;
         let w = if k == 0 || k == n { 0.5 } else { 1.0 };
-        for (p, v) in parts_sq.iter_mut().zip([inertial, cor, g]) {
-            *p += w * v.rows(0, dof).norm_squared();
+        for (sq, kind) in parts_sq
+            .iter_mut()
+            .zip([JointKind::Revolute, JointKind::Prismatic])
+        {
+            for (p, v) in sq.iter_mut().zip([inertial, cor, g]) {
+                *p += w * of_kind(kind, &v);
+            }
         }
         c.t.push(t);
         c.q.push(s.q);
@@ -240,7 +250,7 @@ pub fn run_case(
         c.tau.push(tau);
     }
     let mut st = CaseStats {
-        rms_parts: parts_sq.map(|p| (p / n as f64).sqrt()),
+        rms_parts: parts_sq.map(|sq| sq.map(|p| (p / n as f64).sqrt())),
         ..CaseStats::default()
     };
     let dt = duration / n as f64;
@@ -260,7 +270,6 @@ pub fn run_case(
         st.shootings.push(sign_changes(&tau_i, true));
         let qd_i: Vec<f64> = c.qd.iter().map(|v| v[i]).collect();
         st.reversals.push(sign_changes(&qd_i, false));
-        st.peak_jerk = st.peak_jerk.max(c.peaks.jerk[i]);
         // Acceleration jumps: from rest into the first sample, between samples
         // beyond what the in-piece jerk explains, and into rest after the end.
         let a: Vec<f64> = c.qdd.iter().map(|v| v[i]).collect();
@@ -270,7 +279,7 @@ pub fn run_case(
             jump = jump.max(step);
         }
         if jump > 1e-9 * lim.acceleration {
-            st.acc_jump = st.acc_jump.max(jump);
+            st.acc_jump[i] = jump;
         }
         let peaks = &c.peaks;
         let tol = |l: f64| l * (1.0 + LIMIT_TOL);

@@ -1,14 +1,16 @@
 //! The study's figures (seed Figures 10, 12, 13, 19–34): which ones, their sizes and
-//! what each one draws. Angles in degrees and lengths in millimetres, as in the seed.
+//! what each one draws. Angles in degrees and lengths in millimetres, as in the seed;
+//! each joint's axis in its type's unit ([`super::units::Units`]).
 
 use std::path::Path;
 
 use anyhow::Result;
-use microrobot_model::{JointKind, Robot};
+use microrobot_model::Robot;
 
 use super::Study;
 use super::cases::{Case, Method};
 use super::plot::{Panel, Series, draw, thin};
+use super::units::{Units, kinds};
 
 /// One figure to draw.
 #[derive(Debug, Clone, Copy)]
@@ -52,16 +54,18 @@ pub fn jobs(study: &Study) -> Vec<Job> {
     v
 }
 
-/// Display scale and unit of joint `i`'s position: degrees or millimetres.
-pub fn joint_unit(robot: &Robot, i: usize) -> (f64, &'static str) {
-    match robot.joints().get(i).map(|j| j.kind) {
-        Some(JointKind::Prismatic) => (1e3, "mm"),
-        _ => (180.0 / std::f64::consts::PI, "deg"),
+/// The y-axis unit of a quantity drawn for every joint: one unit, or one per joint
+/// type present ("deg/s (revolute), mm/s (prismatic)").
+fn axis_unit(robot: &Robot, f: impl Fn(Units) -> String) -> String {
+    let ks = kinds(robot);
+    match ks.as_slice() {
+        [k] => f(Units(*k)),
+        _ => ks
+            .iter()
+            .map(|k| format!("{} ({})", f(Units(*k)), Units(*k).kind_name()))
+            .collect::<Vec<_>>()
+            .join(", "),
     }
-}
-
-fn all_revolute(robot: &Robot) -> bool {
-    robot.joints().iter().all(|j| j.kind == JointKind::Revolute)
 }
 
 /// Formats a final time for file names and legends ("5", "2.5").
@@ -83,19 +87,14 @@ fn history(c: &Case, f: impl Fn(usize) -> f64) -> Vec<(f64, f64)> {
 type Figure = (String, (u32, u32), (usize, usize), String, Vec<Panel>);
 /// A quantity of joint 1 over time: title, unit, value at sample k.
 type Joint1Quantity = (&'static str, String, fn(&Case, usize) -> f64);
-/// A quantity of every joint: title, unit suffix, value at sample k of joint i.
-type JointQuantity = (&'static str, &'static str, fn(&Case, usize, usize) -> f64);
+/// A quantity of every joint: title, time-derivative order, value at sample k of joint i.
+type JointQuantity = (&'static str, usize, fn(&Case, usize, usize) -> f64);
 
 /// Draws `job` into `out/figures/`; returns (file, width, height, caption).
 pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u32, String)> {
     let robot = &study.robot;
     let dof = robot.dof();
     let name = robot.name();
-    let ang = if all_revolute(robot) {
-        "deg"
-    } else {
-        "deg or mm"
-    };
     let (file, size, grid, caption, panels): Figure = match *job {
         Job::Workspace => {
             let pts = &study.workspace.fine.points;
@@ -132,12 +131,12 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
                 .sweeps
                 .iter()
                 .map(|s| {
-                    let (sc, u) = joint_unit(robot, s.joint);
-                    let per = if u == "deg" { "mm/rad" } else { "mm/mm" };
+                    let u = Units::of(robot, s.joint);
+                    let (sc, js) = (u.scale(), u.jacobian_scale());
                     Panel {
                         title: format!("joint {} swept", s.joint + 1),
-                        x_label: format!("q{} ({u})", s.joint + 1),
-                        y_label: format!("∂P/∂q{} ({per})", s.joint + 1),
+                        x_label: format!("q{} ({})", s.joint + 1, u.display(0)),
+                        y_label: format!("∂P/∂q{} ({})", s.joint + 1, u.jacobian()),
                         series: ["dPx", "dPy", "dPz"]
                             .iter()
                             .enumerate()
@@ -148,7 +147,7 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
                                     .q
                                     .iter()
                                     .zip(&s.dp)
-                                    .map(|(q, d)| (q * sc, d[a] * 1e3))
+                                    .map(|(q, d)| (q * sc, d[a] * js))
                                     .collect(),
                             })
                             .collect(),
@@ -163,7 +162,7 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
                 GRID6,
                 (dof.div_ceil(cols), cols),
                 format!(
-                    "{name}: Jacobian linear column of each joint against its angle (others mid-range)"
+                    "{name}: Jacobian linear column of each joint against its position (others mid-range)"
                 ),
                 panels,
             )
@@ -198,13 +197,14 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
             )
         }
         Job::Joint1(m) => {
-            let (sc, u) = joint_unit(robot, 0);
+            let u = Units::of(robot, 0);
+            let sc = u.scale();
             let cs: Vec<&Case> = study.cases.iter().filter(|c| c.method == m).collect();
             let quantities: [Joint1Quantity; 4] = [
-                ("position", u.to_string(), |c, k| c.q[k][0]),
-                ("velocity", format!("{u}/s"), |c, k| c.qd[k][0]),
-                ("acceleration", format!("{u}/s²"), |c, k| c.qdd[k][0]),
-                ("jerk", format!("{u}/s³"), |c, k| c.jerk[k][0]),
+                ("position", u.display(0), |c, k| c.q[k][0]),
+                ("velocity", u.display(1), |c, k| c.qd[k][0]),
+                ("acceleration", u.display(2), |c, k| c.qdd[k][0]),
+                ("jerk", u.display(3), |c, k| c.jerk[k][0]),
             ];
             let panels = quantities
                 .iter()
@@ -235,10 +235,11 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
         }
         Job::Joint1Torque(m) => {
             let cs: Vec<&Case> = study.cases.iter().filter(|c| c.method == m).collect();
+            let u = Units::of(robot, 0);
             let panel = Panel {
-                title: "joint 1 torque by inverse dynamics".into(),
+                title: format!("joint 1 {} by inverse dynamics", u.effort_word()),
                 x_label: "t (s)".into(),
-                y_label: "τ1 (N·m)".into(),
+                y_label: format!("τ1 ({})", u.effort()),
                 series: cs
                     .iter()
                     .enumerate()
@@ -255,7 +256,11 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
                 format!("{}_joint1_torque_final_times.png", m.key()),
                 SINGLE,
                 (1, 1),
-                format!("{name}: {} — joint 1 torque at each final time", m.title()),
+                format!(
+                    "{name}: {} — joint 1 {} at each final time",
+                    m.title(),
+                    u.effort_word()
+                ),
                 vec![panel],
             )
         }
@@ -264,22 +269,23 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
                 anyhow::bail!("no case for {} #{k}", m.key());
             };
             let quantities: [JointQuantity; 4] = [
-                ("position", "", |c, k, i| c.q[k][i]),
-                ("velocity", "/s", |c, k, i| c.qd[k][i]),
-                ("acceleration", "/s²", |c, k, i| c.qdd[k][i]),
-                ("jerk", "/s³", |c, k, i| c.jerk[k][i]),
+                ("position", 0, |c, k, i| c.q[k][i]),
+                ("velocity", 1, |c, k, i| c.qd[k][i]),
+                ("acceleration", 2, |c, k, i| c.qdd[k][i]),
+                ("jerk", 3, |c, k, i| c.jerk[k][i]),
             ];
             let panels = quantities
                 .iter()
-                .map(|(title, per, f)| Panel {
+                .map(|(title, order, f)| Panel {
                     title: (*title).into(),
                     x_label: "t (s)".into(),
-                    y_label: format!("{ang}{per}"),
+                    y_label: axis_unit(robot, |u| u.display(*order)),
                     series: (0..dof)
                         .map(|i| {
-                            let (sc, _) = joint_unit(robot, i);
+                            let u = Units::of(robot, i);
+                            let sc = u.scale();
                             Series {
-                                label: format!("joint {}", i + 1),
+                                label: format!("joint {} ({})", i + 1, u.display(*order)),
                                 color: i,
                                 points: history(c, |k| f(c, k, i) * sc),
                             }
@@ -307,12 +313,12 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
                 anyhow::bail!("no case for {} #{k}", m.key());
             };
             let panel = Panel {
-                title: "joint torques by inverse dynamics (RNEA)".into(),
+                title: "joint efforts by inverse dynamics (RNEA)".into(),
                 x_label: "t (s)".into(),
-                y_label: "τ (N·m)".into(),
+                y_label: format!("τ ({})", axis_unit(robot, |u| u.effort().to_string())),
                 series: (0..dof)
                     .map(|i| Series {
-                        label: format!("joint {}", i + 1),
+                        label: format!("joint {} ({})", i + 1, Units::of(robot, i).effort()),
                         color: i,
                         points: history(c, |k| c.tau[k][i]),
                     })
@@ -325,7 +331,8 @@ pub fn draw_job(study: &Study, job: &Job, out: &Path) -> Result<(String, u32, u3
                 SINGLE,
                 (1, 1),
                 format!(
-                    "{name}: torque history, {}, tf = {} s",
+                    "{name}: {} history, {}, tf = {} s",
+                    axis_unit(robot, |u| u.effort_word().to_string()),
                     m.title(),
                     tf_label(c.tf)
                 ),

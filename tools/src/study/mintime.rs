@@ -78,7 +78,11 @@ pub fn check(
         let tau = rnea(robot, &mut data, &s.q, &s.qd, &s.qdd);
         for (i, j) in robot.joints().iter().enumerate() {
             if tau[i].abs() > j.limits.effort * (1.0 + LIMIT_TOL) {
-                return Some(format!("torque j{}", i + 1));
+                return Some(format!(
+                    "{} j{}",
+                    super::units::Units(j.kind).effort_word(),
+                    i + 1
+                ));
             }
         }
     }

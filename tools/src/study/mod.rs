@@ -14,6 +14,7 @@ mod mintime;
 mod motion;
 pub mod plot;
 mod report;
+pub mod units;
 mod verdicts;
 
 use std::path::PathBuf;
@@ -55,10 +56,14 @@ pub struct StudyArgs {
     /// Worker threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
-    /// Quintic boundary accelerations θ̈i,θ̈f for every joint, deg/s² (mm/s² for
-    /// prismatic joints); the seed's Table 4 uses 5,-5. Default: the program's, else 0.
+    /// Quintic boundary accelerations θ̈i,θ̈f of every revolute joint, deg/s²; the
+    /// seed's Table 4 uses 5,-5. Default: the program's, else 0.
     #[arg(long, value_delimiter = ',', num_args = 1.., allow_hyphen_values = true)]
     pub quintic_acc_deg_s2: Option<Vec<f64>>,
+    /// Quintic boundary accelerations of every prismatic joint, mm/s² (two values,
+    /// start,end). Default: the program's, else 0.
+    #[arg(long, value_delimiter = ',', num_args = 1.., allow_hyphen_values = true)]
+    pub quintic_acc_mm_s2: Option<Vec<f64>>,
     /// Skip the PNG figures (numbers, CSV and report only).
     #[arg(long)]
     pub no_figures: bool,
@@ -81,6 +86,7 @@ impl StudyArgs {
             check_samples: 2000,
             threads: 0,
             quintic_acc_deg_s2: None,
+            quintic_acc_mm_s2: None,
             no_figures: false,
         }
     }
@@ -110,7 +116,10 @@ pub struct Study {
     pub cases: Vec<cases::Case>,
     /// Minimum final time per method.
     pub mintimes: Vec<mintime::MinTime>,
-    /// The seed's conclusions checked.
+    /// `None` when the robot is the seed arm, else how it differs
+    /// ([`units::seed_arm_difference`]).
+    pub not_seed: Option<String>,
+    /// The seed's conclusions: checked on the seed arm, measured elsewhere.
     pub verdicts: Vec<verdicts::Verdict>,
     /// Figures written: (file relative to `out`, width, height, caption).
     pub figures: Vec<(String, u32, u32, String)>,
@@ -172,22 +181,41 @@ fn parallel<T: Sync, R: Send>(
 pub fn run(args: StudyArgs) -> Result<Study> {
     let robot = Robot::from_file(&args.robot)
         .with_context(|| format!("robot file {}", args.robot.display()))?;
-    let mut motion = motion::read(&args.program, robot.dof())?;
+    let joints: Vec<_> = robot
+        .joints()
+        .iter()
+        .map(|j| (j.kind, j.name.as_str()))
+        .collect();
+    let mut motion = motion::read(&args.program, &joints)?;
     let robot = match &motion.limits {
         Some(l) => with_limits(&robot, l)?,
         None => robot,
     };
-    if let Some(a) = &args.quintic_acc_deg_s2 {
+    for (flag, given, kind) in [
+        (
+            "--quintic-acc-deg-s2",
+            &args.quintic_acc_deg_s2,
+            microrobot_model::JointKind::Revolute,
+        ),
+        (
+            "--quintic-acc-mm-s2",
+            &args.quintic_acc_mm_s2,
+            microrobot_model::JointKind::Prismatic,
+        ),
+    ] {
+        let Some(a) = given else { continue };
         let [a0, a1] = a[..] else {
-            bail!(
-                "--quintic-acc-deg-s2: give two values, θ̈i,θ̈f (got {})",
-                a.len()
-            );
+            bail!("{flag}: give two values, θ̈i,θ̈f (got {})", a.len());
         };
-        for i in 0..robot.dof() {
-            let (sc, _) = figures::joint_unit(&robot, i);
-            motion.start_acc[i] = a0 / sc;
-            motion.target_acc[i] = a1 / sc;
+        if !robot.joints().iter().any(|j| j.kind == kind) {
+            bail!("{flag}: the robot has no {} joint", units::kind_name(kind));
+        }
+        for (i, j) in robot.joints().iter().enumerate() {
+            if j.kind == kind {
+                let sc = units::Units(kind).scale();
+                motion.start_acc[i] = a0 / sc;
+                motion.target_acc[i] = a1 / sc;
+            }
         }
     }
     if args.final_times.is_empty() {
@@ -199,15 +227,18 @@ pub fn run(args: StudyArgs) -> Result<Study> {
         }
     }
     for (i, j) in robot.joints().iter().enumerate() {
+        let u = units::Units(j.kind);
         for (what, q) in [("start", motion.start[i]), ("target", motion.target[i])] {
             if !j.limits.contains(q) {
                 bail!(
-                    "{}: joint {} {what} {:.4} is outside the robot's range [{:.4}, {:.4}] (rad)",
+                    "{}: joint {} (`{}`) {what} {:.4} is outside the robot's range [{:.4}, {:.4}] ({})",
                     args.program.display(),
                     i + 1,
-                    q,
-                    j.limits.min,
-                    j.limits.max
+                    j.name,
+                    q * u.scale(),
+                    j.limits.min * u.scale(),
+                    j.limits.max * u.scale(),
+                    u.display(0)
                 );
             }
         }
@@ -290,8 +321,10 @@ pub fn run(args: StudyArgs) -> Result<Study> {
         t.elapsed().as_secs_f64(),
     ));
 
+    let not_seed = units::seed_arm_difference(&robot);
     let verdicts = verdicts::compute(
         &robot,
+        not_seed.as_deref(),
         &motion,
         &cases,
         &mintimes,
@@ -312,6 +345,7 @@ pub fn run(args: StudyArgs) -> Result<Study> {
         soft_sync,
         cases,
         mintimes,
+        not_seed,
         verdicts,
         figures: Vec::new(),
         timings,

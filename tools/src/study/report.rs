@@ -1,17 +1,21 @@
 //! The written outputs: `report.md` (+ a plain `report.html` rendering of it), the
-//! CSV data and `summary.json`. Tables use the seed's units (deg, mm, kg·mm²); the
-//! CSV files and `summary.json` are SI with the unit in every column name.
+//! CSV data and `summary.json`. Tables use the seed's units (deg, mm, kg·mm²), each
+//! joint in its type's unit (revolute: deg, N·m; prismatic: mm, N); the CSV files
+//! and `summary.json` are SI with the unit, that of the joint's type, in every
+//! column name and key.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use microrobot_model::JointKind;
-use serde_json::json;
+use microrobot_model::{JointKind, JointVector, Robot};
+use serde_json::{Value, json};
 
 use super::Study;
 use super::cases::{Case, Method, PARTS};
-use super::figures::{joint_unit, tf_label};
+use super::figures::tf_label;
+use super::units::{Units, kinds, max_over};
+use super::verdicts::Status;
 
 const RAD2DEG: f64 = 180.0 / std::f64::consts::PI;
 /// Most rows of a per-case CSV file (histories are thinned evenly beyond that).
@@ -26,6 +30,26 @@ fn joined(v: impl IntoIterator<Item = String>, sep: &str) -> String {
     v.into_iter().collect::<Vec<_>>().join(sep)
 }
 
+/// One joint's peaks in one case, keyed in its type's SI units.
+fn case_joint(robot: &Robot, c: &Case, i: usize) -> Value {
+    let u = Units::of(robot, i);
+    let p = &c.peaks;
+    let mut o = json!({ "joint": i + 1, "kind": u.kind_name() });
+    for (name, order, x) in [
+        ("position_min", 0, p.position_min[i]),
+        ("position_max", 0, p.position_max[i]),
+        ("peak_velocity", 1, p.velocity[i]),
+        ("peak_acceleration", 2, p.acceleration[i]),
+        ("peak_jerk", 3, p.jerk[i]),
+        ("acc_jump", 2, c.stats.acc_jump[i]),
+    ] {
+        o[format!("{name}_{}", u.si_key(order))] = json!(x);
+    }
+    o[format!("peak_tau_{}", u.effort_key())] = json!(c.stats.peak_torque[i]);
+    o[format!("rms_tau_{}", u.effort_key())] = json!(c.stats.rms_torque[i]);
+    o
+}
+
 /// Writes the CSV files under `data/` and `summary.json`.
 pub fn write_data(study: &Study, out: &Path) -> Result<()> {
     let dof = study.robot.dof();
@@ -38,36 +62,52 @@ pub fn write_data(study: &Study, out: &Path) -> Result<()> {
     }
     write(out, "data/workspace_points.csv", &s)?;
 
-    let mut s =
-        String::from("joint,q,dpx_m_per_unit,dpy_m_per_unit,dpz_m_per_unit,px_m,py_m,pz_m\n");
+    // One column set per joint type present; a row fills its joint's type's set.
+    let ks = kinds(&study.robot);
+    let mut s = String::from("joint,kind");
+    for k in &ks {
+        let (q, per) = (Units(*k).si_key(0), Units(*k).si_key(0));
+        let _ = write!(s, ",q_{q},dpx_m_per_{per},dpy_m_per_{per},dpz_m_per_{per}");
+    }
+    s.push_str(",px_m,py_m,pz_m\n");
     for sw in &study.sweeps {
+        let kind = Units::of(&study.robot, sw.joint);
         for k in 0..sw.q.len() {
             let (d, p) = (sw.dp[k], sw.p[k]);
-            let _ = writeln!(
-                s,
-                "{},{},{},{},{},{},{},{}",
-                sw.joint + 1,
-                sw.q[k],
-                d[0],
-                d[1],
-                d[2],
-                p[0],
-                p[1],
-                p[2]
-            );
+            let _ = write!(s, "{},{}", sw.joint + 1, kind.kind_name());
+            for kk in &ks {
+                if *kk == kind.0 {
+                    let _ = write!(s, ",{},{},{},{}", sw.q[k], d[0], d[1], d[2]);
+                } else {
+                    s.push_str(",,,,");
+                }
+            }
+            let _ = writeln!(s, ",{},{},{}", p[0], p[1], p[2]);
         }
     }
     write(out, "data/jacobian_sweeps.csv", &s)?;
 
-    let cols = |p: &str| joined((1..=dof).map(|i| format!("{p}{i}")), ",");
+    let robot = &study.robot;
+    let cols = |p: &str, order: usize| {
+        joined(
+            (0..dof).map(|i| format!("{p}{}_{}", i + 1, Units::of(robot, i).si_key(order))),
+            ",",
+        )
+    };
+    let effort_cols = |p: &str| {
+        joined(
+            (0..dof).map(|i| format!("{p}_{}_{}", Units::of(robot, i).effort_key(), i + 1)),
+            ",",
+        )
+    };
     for c in &study.cases {
         let mut s = format!(
             "t_s,{},{},{},{},{}\n",
-            cols("q"),
-            cols("qd"),
-            cols("qdd"),
-            cols("jerk"),
-            cols("tau_nm_")
+            cols("q", 0),
+            cols("qd", 1),
+            cols("qdd", 2),
+            cols("jerk", 3),
+            effort_cols("tau")
         );
         let n = c.t.len();
         let stride = n.div_ceil(CSV_ROWS).max(1);
@@ -97,12 +137,23 @@ pub fn write_data(study: &Study, out: &Path) -> Result<()> {
         )?;
     }
 
+    let per_kind = |p: &str, order: usize| {
+        joined(
+            ks.iter()
+                .map(|k| format!("{p}_{}", Units(*k).si_key(order))),
+            ",",
+        )
+    };
     let mut s = format!(
-        "method,tf_s,duration_s,{},{},peak_jerk_rad_s3,acc_jump_rad_s2,energy_j,violations,shootings_total,{}\n",
-        cols("peak_tau_nm_"),
-        cols("rms_tau_nm_"),
-        cols("shootings_")
+        "method,tf_s,duration_s,{},{},{},{},energy_j,violations,shootings_total,{}\n",
+        effort_cols("peak_tau"),
+        effort_cols("rms_tau"),
+        per_kind("peak_jerk", 3),
+        per_kind("acc_jump", 2),
+        joined((1..=dof).map(|i| format!("shootings_{i}")), ",")
     );
+    let by_kind =
+        |v: &JointVector| joined(ks.iter().map(|k| max_over(robot, *k, v).to_string()), ",");
     for c in &study.cases {
         let st = &c.stats;
         let _ = writeln!(
@@ -113,8 +164,8 @@ pub fn write_data(study: &Study, out: &Path) -> Result<()> {
             c.duration,
             joined((0..dof).map(|i| format!("{}", st.peak_torque[i])), ","),
             joined((0..dof).map(|i| format!("{}", st.rms_torque[i])), ","),
-            st.peak_jerk,
-            st.acc_jump,
+            by_kind(&c.peaks.jerk),
+            by_kind(&st.acc_jump),
             st.energy,
             st.violations.len(),
             st.shootings.iter().sum::<usize>(),
@@ -123,24 +174,40 @@ pub fn write_data(study: &Study, out: &Path) -> Result<()> {
     }
     write(out, "data/comparison.csv", &s)?;
 
-    let mut s = String::from(
-        "method,tf_s,joint,peak_velocity,peak_acceleration,peak_jerk,position_min,position_max\n",
-    );
+    let mut s = String::from("method,tf_s,joint,kind");
+    for k in &ks {
+        let u = Units(*k);
+        let _ = write!(
+            s,
+            ",peak_velocity_{},peak_acceleration_{},peak_jerk_{},position_min_{p},position_max_{p}",
+            u.si_key(1),
+            u.si_key(2),
+            u.si_key(3),
+            p = u.si_key(0)
+        );
+    }
+    s.push('\n');
     for c in &study.cases {
         for i in 0..dof {
             let p = &c.peaks;
-            let _ = writeln!(
-                s,
-                "{},{},{},{},{},{},{},{}",
-                c.method.key(),
-                c.tf,
-                i + 1,
-                p.velocity[i],
-                p.acceleration[i],
-                p.jerk[i],
-                p.position_min[i],
-                p.position_max[i]
-            );
+            let u = Units::of(robot, i);
+            let _ = write!(s, "{},{},{},{}", c.method.key(), c.tf, i + 1, u.kind_name());
+            for k in &ks {
+                if *k == u.0 {
+                    let _ = write!(
+                        s,
+                        ",{},{},{},{},{}",
+                        p.velocity[i],
+                        p.acceleration[i],
+                        p.jerk[i],
+                        p.position_min[i],
+                        p.position_max[i]
+                    );
+                } else {
+                    s.push_str(",,,,,");
+                }
+            }
+            s.push('\n');
         }
     }
     write(out, "data/kinematic_peaks.csv", &s)?;
@@ -166,11 +233,19 @@ pub fn write_data(study: &Study, out: &Path) -> Result<()> {
     let _ = writeln!(s, "all,{}", study.soft_sync);
     write(out, "data/soft_time_optimal.csv", &s)?;
 
-    let v = |x: &microrobot_model::JointVector| (0..dof).map(|i| x[i]).collect::<Vec<f64>>();
+    let v = |x: &JointVector| (0..dof).map(|i| x[i]).collect::<Vec<f64>>();
+    let all_revolute = ks == [JointKind::Revolute];
     let ws = &study.workspace.fine;
     let summary = json!({
         "robot": study.args.robot.display().to_string(),
         "program": study.args.program.display().to_string(),
+        "seed_arm": study.not_seed.is_none(),
+        "not_seed_arm_because": study.not_seed,
+        "joints": (0..dof).map(|i| json!({
+            "joint": i + 1,
+            "name": robot.joints()[i].name,
+            "kind": Units::of(robot, i).kind_name(),
+        })).collect::<Vec<_>>(),
         "final_times_s": study.args.final_times,
         "soft_time_optimal_s": { "per_joint": study.soft_alone, "synchronised": study.soft_sync },
         "workspace": {
@@ -183,23 +258,54 @@ pub fn write_data(study: &Study, out: &Path) -> Result<()> {
         },
         "jacobian_rank_reference": study.rank,
         "jacobian_rank_max": study.max_rank,
-        "cases": study.cases.iter().map(|c| json!({
-            "method": c.method.key(),
-            "tf_s": c.tf,
-            "duration_s": c.duration,
-            "peak_velocity": v(&c.peaks.velocity),
-            "peak_acceleration": v(&c.peaks.acceleration),
-            "peak_jerk": v(&c.peaks.jerk),
-            "peak_torque_nm": v(&c.stats.peak_torque),
-            "rms_torque_nm": v(&c.stats.rms_torque),
-            "energy_j": c.stats.energy,
-            "acc_jump": c.stats.acc_jump,
-            "shootings": c.stats.shootings,
-            "rms_parts_nm": { "inertial": c.stats.rms_parts[0], "coriolis": c.stats.rms_parts[1], "gravity": c.stats.rms_parts[2] },
-            "violations": c.stats.violations.iter().map(|x| json!({
-                "joint": x.joint + 1, "quantity": x.quantity, "value": x.value, "limit": x.limit
-            })).collect::<Vec<_>>(),
-        })).collect::<Vec<_>>(),
+        "cases": study.cases.iter().map(|c| {
+            let mut o = json!({
+                "method": c.method.key(),
+                "tf_s": c.tf,
+                "duration_s": c.duration,
+                "energy_j": c.stats.energy,
+                "shootings": c.stats.shootings,
+                "joints": (0..dof).map(|i| case_joint(robot, c, i)).collect::<Vec<_>>(),
+                "violations": c.stats.violations.iter().map(|x| {
+                    let u = Units::of(robot, x.joint);
+                    let key = if x.quantity == "torque" {
+                        u.effort_key().to_string()
+                    } else {
+                        u.si_key(["position", "velocity", "acceleration", "jerk"]
+                            .iter()
+                            .position(|q| *q == x.quantity)
+                            .unwrap_or(0))
+                    };
+                    json!({
+                        "joint": x.joint + 1,
+                        "quantity": if x.quantity == "torque" { u.effort_word() } else { x.quantity },
+                        format!("value_{key}"): x.value,
+                        format!("limit_{key}"): x.limit,
+                    })
+                }).collect::<Vec<_>>(),
+            });
+            for (kind, ki) in [(JointKind::Revolute, 0), (JointKind::Prismatic, 1)] {
+                if !ks.contains(&kind) {
+                    continue;
+                }
+                let u = Units(kind);
+                let p = c.stats.rms_parts[ki];
+                o[format!("acc_jump_{}", u.si_key(2))] = json!(max_over(robot, kind, &c.stats.acc_jump));
+                o[format!("rms_parts_{}", u.effort_key())] =
+                    json!({ "inertial": p[0], "coriolis": p[1], "gravity": p[2] });
+            }
+            // Per-joint arrays in one unit, for arms whose joints are all revolute.
+            if all_revolute {
+                o["peak_velocity_rad_s"] = json!(v(&c.peaks.velocity));
+                o["peak_acceleration_rad_s2"] = json!(v(&c.peaks.acceleration));
+                o["peak_jerk_rad_s3"] = json!(v(&c.peaks.jerk));
+                o["peak_velocity"] = o["peak_velocity_rad_s"].clone();
+                o["peak_acceleration"] = o["peak_acceleration_rad_s2"].clone();
+                o["peak_torque_nm"] = json!(v(&c.stats.peak_torque));
+                o["rms_torque_nm"] = json!(v(&c.stats.rms_torque));
+            }
+            o
+        }).collect::<Vec<_>>(),
         "min_final_time": study.mintimes.iter().map(|m| json!({
             "method": m.method.key(),
             "kinematic_minimum_s": m.kinematic,
@@ -249,12 +355,11 @@ fn markdown(study: &Study) -> String {
     let joints = robot.joints();
     let m = &study.motion;
     let mut s = String::new();
-    let jh = |p: &str| (1..=dof).map(|i| format!("{p}{i}")).collect::<Vec<_>>();
     let total: f64 = study.timings.iter().map(|t| t.1).sum();
     let _ = writeln!(s, "# Study of `{}`\n", robot.name());
     let _ = writeln!(
         s,
-        "Robot file `{}`, motion program `{}` (motion \"{}\"). Everything below is computed by `microrobot study` from these two files with the model and trajectory libraries; tables are in the seed's units (degrees, millimetres, kg·mm²), the CSV files under `data/` and `summary.json` are SI. Settings: final times {} s; {} time steps per trajectory; {} workspace samples; {} torque samples per check in the minimum-time search. Computation took {:.2} s ({}).\n",
+        "Robot file `{}`, motion program `{}` (motion \"{}\"). Everything below is computed by `microrobot study` from these two files with the model and trajectory libraries; tables are in the seed's units (degrees, millimetres, kg·mm², N·m), a prismatic joint's positions in mm and its effort, a force, in N; the CSV files under `data/` and `summary.json` are SI. Settings: final times {} s; {} time steps per trajectory; {} workspace samples; {} torque samples per check in the minimum-time search. Computation took {:.2} s ({}).\n",
         study.args.robot.display(),
         study.args.program.display(),
         m.name,
@@ -309,7 +414,8 @@ fn markdown(study: &Study) -> String {
         .iter()
         .enumerate()
         .map(|(i, j)| {
-            let (sc, u) = joint_unit(robot, i);
+            let u = Units::of(robot, i);
+            let (sc, u) = (u.scale(), u.display(0));
             vec![
                 format!("{}", i + 1),
                 format!("{} {u}", f(j.limits.min * sc, 3)),
@@ -323,9 +429,11 @@ fn markdown(study: &Study) -> String {
         .iter()
         .enumerate()
         .map(|(i, j)| {
-            let (sc, _) = joint_unit(robot, i);
+            let u = Units::of(robot, i);
+            let sc = u.scale();
             vec![
                 format!("{}", i + 1),
+                u.display(0),
                 f(m.start[i] * sc, 3),
                 f(m.target[i] * sc, 3),
                 f(m.start_acc[i] * sc, 3),
@@ -333,7 +441,7 @@ fn markdown(study: &Study) -> String {
                 f(j.limits.velocity * sc, 3),
                 f(j.limits.acceleration * sc, 3),
                 f(j.limits.jerk * sc, 3),
-                f(j.limits.effort, 3),
+                format!("{} {}", f(j.limits.effort, 3), u.effort()),
                 f(study.soft_alone[i], 6),
             ]
         })
@@ -341,14 +449,15 @@ fn markdown(study: &Study) -> String {
     s += &table(
         &[
             "joint",
-            "θi",
-            "θf",
-            "θ̈i (/s², quintic)",
-            "θ̈f (/s², quintic)",
-            "θ̇max (/s)",
-            "θ̈max (/s²)",
-            "Jmax (/s³)",
-            "torque limit (N·m)",
+            "unit u",
+            "θi (u)",
+            "θf (u)",
+            "θ̈i (u/s², quintic)",
+            "θ̈f (u/s², quintic)",
+            "θ̇max (u/s)",
+            "θ̈max (u/s²)",
+            "Jmax (u/s³)",
+            "effort limit",
             "time-optimal soft motion alone (s)",
         ]
         .map(String::from),
@@ -362,8 +471,8 @@ fn markdown(study: &Study) -> String {
         } else {
             "the robot file"
         },
-        if study.args.quintic_acc_deg_s2.is_some() {
-            "`--quintic-acc-deg-s2`"
+        if study.args.quintic_acc_deg_s2.is_some() || study.args.quintic_acc_mm_s2.is_some() {
+            "`--quintic-acc-deg-s2` / `--quintic-acc-mm-s2`"
         } else {
             "the program (0 when it gives none)"
         },
@@ -397,7 +506,10 @@ fn markdown(study: &Study) -> String {
                 f(l.inertia[(0, 1)] * k, 3),
                 f(l.inertia[(0, 2)] * k, 3),
                 f(l.inertia[(1, 2)] * k, 3),
-                f(j.rotor_inertia * k, 3),
+                match j.kind {
+                    JointKind::Revolute => format!("{} kg·mm²", f(j.rotor_inertia * k, 3)),
+                    JointKind::Prismatic => format!("{} kg", f(j.rotor_inertia, 4)),
+                },
             ]
         })
         .collect();
@@ -412,7 +524,7 @@ fn markdown(study: &Study) -> String {
             "Ixy",
             "Ixz",
             "Iyz",
-            "I_act (kg·mm²)",
+            "I_act (rotor; reflected mass for prismatic)",
         ]
         .map(String::from),
         &rows,
@@ -475,8 +587,8 @@ fn markdown(study: &Study) -> String {
         "Each joint sweeps its range while the others stay mid-range, q_ref = ({}). The Jacobian's rank at q_ref is **{}** of {}; its largest rank over 2000 random configurations inside the limits is **{}**.\n",
         joined(
             (0..dof).map(|i| {
-                let (sc, u) = joint_unit(robot, i);
-                format!("{} {u}", f(qr[i] * sc, 1))
+                let u = Units::of(robot, i);
+                format!("{} {}", f(qr[i] * u.scale(), 1), u.display(0))
             }),
             ", "
         ),
@@ -521,32 +633,34 @@ fn markdown(study: &Study) -> String {
         s,
         "### Kinematic peaks (exact extremes of the planned polynomials)\n"
     );
-    for (title, unit, get, lim) in [
+    for (title, order, get, lim) in [
         (
             "peak |velocity|",
-            "/s",
+            1,
             (|c: &Case, i: usize| c.peaks.velocity[i]) as fn(&Case, usize) -> f64,
             (|l: &microrobot_model::JointLimits| l.velocity)
                 as fn(&microrobot_model::JointLimits) -> f64,
         ),
         (
             "peak |acceleration|",
-            "/s²",
+            2,
             |c, i| c.peaks.acceleration[i],
             |l| l.acceleration,
         ),
         (
             "peak |jerk| (inside pieces)",
-            "/s³",
+            3,
             |c, i| c.peaks.jerk[i],
             |l| l.jerk,
         ),
     ] {
         let mut head = vec!["method".to_string(), "tf (s)".to_string()];
-        head.extend(jh("j"));
+        head.extend(
+            (0..dof).map(|i| format!("j{} ({})", i + 1, Units::of(robot, i).display(order))),
+        );
         let mut rows = vec![{
             let mut r = vec!["limit".to_string(), String::new()];
-            r.extend((0..dof).map(|i| f(lim(&joints[i].limits) * joint_unit(robot, i).0, 3)));
+            r.extend((0..dof).map(|i| f(lim(&joints[i].limits) * Units::of(robot, i).scale(), 3)));
             r
         }];
         for c in &study.cases {
@@ -554,12 +668,12 @@ fn markdown(study: &Study) -> String {
             r.extend((0..dof).map(|i| {
                 let v = get(c, i);
                 let over = v > lim(&joints[i].limits) * (1.0 + super::cases::LIMIT_TOL);
-                let t = f(v * joint_unit(robot, i).0, 3);
+                let t = f(v * Units::of(robot, i).scale(), 3);
                 if over { format!("**{t}**") } else { t }
             }));
             rows.push(r);
         }
-        let _ = writeln!(s, "{title} (deg{unit}; bold: above the limit)\n");
+        let _ = writeln!(s, "{title} (bold: above the limit)\n");
         s += &table(&head, &rows);
         s.push('\n');
     }
@@ -575,7 +689,9 @@ fn markdown(study: &Study) -> String {
         "tf (s)".to_string(),
         "duration (s)".to_string(),
     ];
-    head.extend(jh("peak |τ| j").iter().map(|h| format!("{h} (N·m)")));
+    head.extend(
+        (0..dof).map(|i| format!("peak |τ| j{} ({})", i + 1, Units::of(robot, i).effort())),
+    );
     let rows: Vec<Vec<String>> = study
         .cases
         .iter()
@@ -588,7 +704,7 @@ fn markdown(study: &Study) -> String {
     s += &table(&head, &rows);
     s.push('\n');
     let mut head = vec!["method".to_string(), "tf (s)".to_string()];
-    head.extend(jh("RMS τ j").iter().map(|h| format!("{h} (N·m)")));
+    head.extend((0..dof).map(|i| format!("RMS τ j{} ({})", i + 1, Units::of(robot, i).effort())));
     let rows: Vec<Vec<String>> = study
         .cases
         .iter()
@@ -600,34 +716,42 @@ fn markdown(study: &Study) -> String {
         .collect();
     s += &table(&head, &rows);
     s.push('\n');
-    let head = [
-        "method",
-        "tf (s)",
-        "peak jerk (deg/s³)",
-        "acc. jump (deg/s²)",
-        "energy (J)",
-        "violations",
-        "shootings",
-        "dominant torque part (RMS N·m)",
-    ]
-    .map(String::from);
+    let ks = kinds(robot);
+    let mut head = vec!["method".to_string(), "tf (s)".to_string()];
+    let of = |k: JointKind| {
+        if ks.len() > 1 {
+            format!(", {}", Units(k).kind_name())
+        } else {
+            String::new()
+        }
+    };
+    for k in &ks {
+        head.push(format!("peak jerk ({}{})", Units(*k).display(3), of(*k)));
+    }
+    for k in &ks {
+        head.push(format!("acc. jump ({}{})", Units(*k).display(2), of(*k)));
+    }
+    head.extend(["energy (J)", "violations", "shootings"].map(String::from));
+    for k in &ks {
+        head.push(format!(
+            "dominant part (RMS {}{})",
+            Units(*k).effort(),
+            of(*k)
+        ));
+    }
     let rows: Vec<Vec<String>> = study
         .cases
         .iter()
         .map(|c| {
             let st = &c.stats;
-            let d = (0..3).fold(0, |b, i| {
-                if st.rms_parts[i] > st.rms_parts[b] {
-                    i
-                } else {
-                    b
-                }
-            });
-            vec![
-                c.method.key().to_string(),
-                tf_label(c.tf),
-                f(st.peak_jerk * RAD2DEG, 3),
-                f(st.acc_jump * RAD2DEG, 3),
+            let mut r = vec![c.method.key().to_string(), tf_label(c.tf)];
+            for k in &ks {
+                r.push(f(max_over(robot, *k, &c.peaks.jerk) * Units(*k).scale(), 3));
+            }
+            for k in &ks {
+                r.push(f(max_over(robot, *k, &st.acc_jump) * Units(*k).scale(), 3));
+            }
+            r.extend([
                 f(st.energy, 4),
                 st.violations.len().to_string(),
                 format!(
@@ -635,8 +759,13 @@ fn markdown(study: &Study) -> String {
                     st.shootings.iter().sum::<usize>(),
                     joined(st.shootings.iter().map(|n| n.to_string()), "/")
                 ),
-                format!("{} ({})", PARTS[d], f(st.rms_parts[d], 3)),
-            ]
+            ]);
+            for k in &ks {
+                let p = st.rms_parts[usize::from(*k == JointKind::Prismatic)];
+                let d = (0..3).fold(0, |b, i| if p[i] > p[b] { i } else { b });
+                r.push(format!("{} ({})", PARTS[d], f(p[d], 3)));
+            }
+            r
         })
         .collect();
     s += &table(&head, &rows);
@@ -649,13 +778,23 @@ fn markdown(study: &Study) -> String {
         any = true;
         let list = joined(
             c.stats.violations.iter().map(|v| {
-                let (sc, u) = joint_unit(robot, v.joint);
+                let ju = Units::of(robot, v.joint);
+                let sc = ju.scale();
                 let (val, lim, unit) = match v.quantity {
-                    "torque" => (v.value, v.limit, "N·m".to_string()),
-                    "position" => (v.value * sc, v.limit * sc, format!("{u} beyond the limit")),
-                    "velocity" => (v.value * sc, v.limit * sc, format!("{u}/s")),
-                    "acceleration" => (v.value * sc, v.limit * sc, format!("{u}/s²")),
-                    _ => (v.value * sc, v.limit * sc, format!("{u}/s³")),
+                    "torque" => (v.value, v.limit, ju.effort().to_string()),
+                    "position" => (
+                        v.value * sc,
+                        v.limit * sc,
+                        format!("{} beyond the limit", ju.display(0)),
+                    ),
+                    "velocity" => (v.value * sc, v.limit * sc, ju.display(1)),
+                    "acceleration" => (v.value * sc, v.limit * sc, ju.display(2)),
+                    _ => (v.value * sc, v.limit * sc, ju.display(3)),
+                };
+                let quantity = if v.quantity == "torque" {
+                    ju.effort_word()
+                } else {
+                    v.quantity
                 };
                 if v.quantity == "position" {
                     format!(
@@ -668,7 +807,7 @@ fn markdown(study: &Study) -> String {
                     format!(
                         "j{} {} {} > {} {unit}",
                         v.joint + 1,
-                        v.quantity,
+                        quantity,
                         f(val, 3),
                         f(lim, 3)
                     )
@@ -727,18 +866,50 @@ fn markdown(study: &Study) -> String {
     );
 
     // Verdicts.
-    let _ = writeln!(s, "\n## 7. The seed's conclusions checked\n");
-    let _ = writeln!(s, "Each verdict is computed from the numbers above.\n");
+    match &study.not_seed {
+        None => {
+            let _ = writeln!(s, "\n## 7. The seed's conclusions checked\n");
+            let _ = writeln!(
+                s,
+                "This robot is the seed arm (its joints, DH rows, links, rotor inertias, tool and payload equal `config/robots/seed-arm.toml`'s). Each verdict is computed from the numbers above.\n"
+            );
+        }
+        Some(why) => {
+            let _ = writeln!(
+                s,
+                "\n## 7. What was measured on this robot (the seed's conclusions do not apply)\n"
+            );
+            let _ = writeln!(
+                s,
+                "This robot is not the seed arm: {why}. The seed's conclusions are claims about the seed arm, so none of them is checked here; for each, what was measured on this robot.\n"
+            );
+        }
+    }
     for v in &study.verdicts {
-        let _ = writeln!(
-            s,
-            "- **{}** — {} Computed: {} **Verdict: {}.** (`{}`)",
-            if v.holds { "Holds" } else { "Does not hold" },
-            v.claim,
-            v.finding,
-            if v.holds { "confirmed" } else { "refuted" },
-            v.id
-        );
+        match v.status {
+            Status::NotApplicable => {
+                let _ = writeln!(
+                    s,
+                    "- **Not checked** — Seed claim: {} Measured on this robot: {} **Does not apply: not the seed arm.** (`{}`)",
+                    v.claim, v.finding, v.id
+                );
+            }
+            st => {
+                let _ = writeln!(
+                    s,
+                    "- **{}** — {} Computed: {} **Verdict: {}.** (`{}`)",
+                    if st == Status::Confirmed {
+                        "Holds"
+                    } else {
+                        "Does not hold"
+                    },
+                    v.claim,
+                    v.finding,
+                    st.label(),
+                    v.id
+                );
+            }
+        }
     }
 
     // Files.
@@ -748,7 +919,7 @@ fn markdown(study: &Study) -> String {
     }
     let _ = writeln!(
         s,
-        "- `data/comparison.csv`, `data/kinematic_peaks.csv`, `data/min_final_time.csv`, `data/soft_time_optimal.csv`, `data/workspace_points.csv`, `data/jacobian_sweeps.csv`; `data/cases/<method>_<tf>s.csv`: t, q, q̇, q̈, jerk, τ of every joint (SI, at most {} rows, evenly thinned); `summary.json`: every number of the tables and the verdicts (SI).",
+        "- `data/comparison.csv`, `data/kinematic_peaks.csv`, `data/min_final_time.csv`, `data/soft_time_optimal.csv`, `data/workspace_points.csv`, `data/jacobian_sweeps.csv`; `data/cases/<method>_<tf>s.csv`: t, q, q̇, q̈, jerk, τ of every joint (SI, in each joint's type's unit, named in the header; at most {} rows, evenly thinned); `summary.json`: every number of the tables and the verdicts (SI).",
         CSV_ROWS + 1
     );
     s

@@ -1,8 +1,13 @@
 //! The seed's conclusions checked against the computed numbers. Every verdict is
 //! derived from the cases, the searches and the Jacobian; nothing is written in.
+//! The claims are about the seed arm: they are checked only when the robot is the
+//! seed arm ([`super::units::seed_arm_difference`]); on any other robot each one
+//! reports what was measured and that the claim does not apply.
 
-use microrobot_model::Robot;
+use microrobot_model::{JointKind, Robot};
 use serde::Serialize;
+
+use super::units::Units;
 
 use super::cases::{Case, Method, PARTS};
 use super::kinematics::{Sweep, max_jacobian_element};
@@ -16,15 +21,53 @@ pub struct Verdict {
     pub id: &'static str,
     /// The seed's claim, with its section.
     pub claim: String,
-    /// What was computed.
+    /// What was computed (on this robot).
     pub finding: String,
-    /// Whether the numbers support the claim.
-    pub holds: bool,
+    /// Whether the numbers support the claim; `None` when it was not checked (the
+    /// robot is not the seed arm).
+    pub holds: Option<bool>,
+    /// The outcome.
+    pub status: Status,
     /// The computed value the verdict turns on (e.g. a joint number), for machines.
     pub value: String,
 }
 
-const RAD2DEG: f64 = 180.0 / std::f64::consts::PI;
+/// What became of a seed claim.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// Checked on the seed arm; the numbers support it.
+    Confirmed,
+    /// Checked on the seed arm; the numbers contradict it.
+    Refuted,
+    /// Not checked: the robot is not the seed arm.
+    NotApplicable,
+}
+
+impl Status {
+    /// Words for the report.
+    pub fn label(self) -> &'static str {
+        match self {
+            Status::Confirmed => "confirmed",
+            Status::Refuted => "refuted",
+            Status::NotApplicable => "not checked (not the seed arm)",
+        }
+    }
+}
+
+/// A claim and what the numbers say, before deciding whether it was checked.
+struct Measured {
+    id: &'static str,
+    claim: String,
+    finding: String,
+    holds: bool,
+    value: String,
+}
+
+/// A peak effort of joint `i` with its unit ("12.000 N·m", "3.000 N").
+fn effort(robot: &Robot, i: usize, v: f64) -> String {
+    format!("{v:.3} {}", Units::of(robot, i).effort())
+}
 
 /// Peak |τ| of each joint over all cases.
 fn joint_peaks(cases: &[Case], dof: usize) -> Vec<f64> {
@@ -37,19 +80,55 @@ fn joint_peaks(cases: &[Case], dof: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Joints whose value equals the extreme (`highest` or lowest) within 1e-9
-/// relative: ties are reported, not broken by index.
-fn extreme_joints(peaks: &[f64], highest: bool) -> (Vec<usize>, f64) {
+/// Joints among `among` whose value equals the extreme (`highest` or lowest)
+/// within 1e-9 relative: ties are reported, not broken by index.
+fn extreme_joints(peaks: &[f64], among: &[usize], highest: bool) -> (Vec<usize>, f64) {
+    let vals = among.iter().map(|&i| peaks[i]);
     let ext = if highest {
-        peaks.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+        vals.fold(f64::NEG_INFINITY, f64::max)
     } else {
-        peaks.iter().copied().fold(f64::INFINITY, f64::min)
+        vals.fold(f64::INFINITY, f64::min)
     };
     let tol = 1e-9 * ext.abs().max(1e-12);
-    let set = (0..peaks.len())
+    let set = among
+        .iter()
+        .copied()
         .filter(|&i| (peaks[i] - ext).abs() <= tol)
         .collect();
     (set, ext)
+}
+
+/// The joints whose effort is compared: the revolute ones (the seed's claims are
+/// about torques), or all when there are none.
+fn compared_joints(robot: &Robot) -> Vec<usize> {
+    let rev: Vec<usize> = (0..robot.dof())
+        .filter(|&i| robot.joints()[i].kind == JointKind::Revolute)
+        .collect();
+    if rev.is_empty() {
+        (0..robot.dof()).collect()
+    } else {
+        rev
+    }
+}
+
+/// Index into [`super::cases::CaseStats::rms_parts`] of the compared joints.
+fn parts_kind(robot: &Robot) -> usize {
+    usize::from(!robot.joints().iter().any(|j| j.kind == JointKind::Revolute))
+}
+
+/// Largest peak effort per joint type present: "1.234 N·m and 5.678 N".
+fn peak_by_kind(robot: &Robot, v: &microrobot_model::JointVector) -> String {
+    super::units::kinds(robot)
+        .into_iter()
+        .map(|k| {
+            format!(
+                "{:.3} {}",
+                super::units::max_over(robot, k, v),
+                Units(k).effort()
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(" and ")
 }
 
 fn joint_list(set: &[usize]) -> String {
@@ -68,14 +147,18 @@ fn joined(set: &[usize]) -> String {
         .join(",")
 }
 
-fn dominant(c: &Case) -> usize {
-    let p = c.stats.rms_parts;
+fn dominant(c: &Case, kind: usize) -> usize {
+    let p = c.stats.rms_parts[kind];
     (0..3).fold(0, |b, i| if p[i] > p[b] { i } else { b })
 }
 
-/// Computes every verdict. `cases` holds each method at each of `final_times`.
+/// Computes every verdict. `cases` holds each method at each of `final_times`;
+/// `not_seed` is how the robot differs from the seed arm (`None`: it is the seed
+/// arm, and every claim is checked).
+#[allow(clippy::too_many_arguments)]
 pub fn compute(
     robot: &Robot,
+    not_seed: Option<&str>,
     motion: &StudyMotion,
     cases: &[Case],
     mintimes: &[MinTime],
@@ -94,7 +177,9 @@ pub fn compute(
 
     // 1. Highest torque at joint 1.
     let peaks = joint_peaks(cases, dof);
-    let (hi_set, hi_v) = extreme_joints(&peaks, true);
+    let among = compared_joints(robot);
+    let pk = parts_kind(robot);
+    let (hi_set, hi_v) = extreme_joints(&peaks, &among, true);
     let wins: Vec<String> = (0..dof)
         .map(|i| {
             let n = cases
@@ -108,13 +193,14 @@ pub fn compute(
         })
         .collect();
     let grav = robot.gravity();
-    out.push(Verdict {
+    out.push(Measured {
         id: "highest_torque_joint",
         claim: "The highest hub torque is at joint 1 (sections 5.2.1-5.2.4, 5.3, 6).".into(),
         finding: format!(
-            "{} carries the highest peak torque, {:.3} N·m over all {} cases (cases in which each joint is highest, ties counted for each: {}). Gravity is ({:.2}, {:.2}, {:.2}) m/s² in the base frame.",
+            "{} carries the highest peak {}, {} over all {} cases (cases in which each joint is highest, ties counted for each: {}). Gravity is ({:.2}, {:.2}, {:.2}) m/s² in the base frame.",
             joint_list(&hi_set),
-            hi_v,
+            Units::of(robot, hi_set.first().copied().unwrap_or(0)).effort_word(),
+            effort(robot, hi_set.first().copied().unwrap_or(0), hi_v),
             cases.len(),
             wins.join(", "),
             grav.x,
@@ -126,14 +212,16 @@ pub fn compute(
     });
 
     // 2. Lowest torque at joint 6 (the last joint).
-    let (lo_set, lo_v) = extreme_joints(&peaks, false);
-    out.push(Verdict {
+    let (lo_set, lo_v) = extreme_joints(&peaks, &among, false);
+    out.push(Measured {
         id: "lowest_torque_joint",
-        claim: format!("The actuator torque of joint {dof} is the lowest (sections 5.2, 5.3, 6)."),
+        claim: "The actuator torque of joint 6, the last, is the lowest (sections 5.2, 5.3, 6)."
+            .into(),
         finding: format!(
-            "{} has the lowest peak torque, {:.3} N·m over all cases.",
+            "{} has the lowest peak {}, {} over all cases.",
             joint_list(&lo_set),
-            lo_v
+            Units::of(robot, lo_set.first().copied().unwrap_or(0)).effort_word(),
+            effort(robot, lo_set.first().copied().unwrap_or(0), lo_v)
         ),
         holds: lo_set.contains(&(dof - 1)),
         value: joined(&lo_set),
@@ -144,13 +232,21 @@ pub fn compute(
     let mut all_grow = true;
     for m in Method::ALL {
         if let (Some(a), Some(b)) = (case(m, t_short), case(m, t_long)) {
-            let pa = a.stats.peak_torque.max();
-            let pb = b.stats.peak_torque.max();
-            all_grow &= pb > pa;
-            grows.push(format!("{}: {pa:.3} → {pb:.3} N·m", m.key()));
+            let max = |c: &Case| {
+                among
+                    .iter()
+                    .fold(0.0f64, |x, &i| x.max(c.stats.peak_torque[i]))
+            };
+            all_grow &= max(b) > max(a);
+            grows.push(format!(
+                "{}: {} → {}",
+                m.key(),
+                peak_by_kind(robot, &a.stats.peak_torque),
+                peak_by_kind(robot, &b.stats.peak_torque)
+            ));
         }
     }
-    out.push(Verdict {
+    out.push(Measured {
         id: "torque_grows_with_final_time",
         claim: "Increasing the final time dramatically increases the peak joint torque (sections 5.2.2, 5.2.4).".into(),
         finding: format!(
@@ -166,22 +262,27 @@ pub fn compute(
     let mut seed_pattern = true;
     for m in Method::ALL {
         if let (Some(a), Some(b)) = (case(m, t_short), case(m, t_long)) {
-            let (da, db) = (dominant(a), dominant(b));
+            let (da, db) = (dominant(a, pk), dominant(b, pk));
             seed_pattern &= da == 0 && db == 1;
+            let u = if pk == 0 { "N·m" } else { "N" };
             dom.push(format!(
-                "{}: {} ({:.3} N·m RMS) at {t_short} s, {} ({:.3} N·m RMS) at {t_long} s",
+                "{}: {} ({:.3} {u} RMS) at {t_short} s, {} ({:.3} {u} RMS) at {t_long} s",
                 m.key(),
                 PARTS[da],
-                a.stats.rms_parts[da],
+                a.stats.rms_parts[pk][da],
                 PARTS[db],
-                b.stats.rms_parts[db]
+                b.stats.rms_parts[pk][db]
             ));
         }
     }
-    out.push(Verdict {
+    out.push(Measured {
         id: "dominant_torque_term",
         claim: "At tf = 5 s the inertia term dominates the torque; longer final times shift the dominant term to the Coriolis and centrifugal terms (sections 5.2.2, 5.2.4).".into(),
-        finding: format!("Dominant part by RMS over time: {}.", dom.join("; ")),
+        finding: format!(
+            "Dominant part by RMS over time (over the {} joints): {}.",
+            if pk == 0 { "revolute" } else { "prismatic" },
+            dom.join("; ")
+        ),
         holds: seed_pattern,
         value: format!("{seed_pattern}"),
     });
@@ -211,7 +312,7 @@ pub fn compute(
         .filter(|t| t.1 == fewest)
         .map(|t| t.0.key())
         .collect();
-    out.push(Verdict {
+    out.push(Measured {
         id: "soft_fewest_shootings",
         claim:
             "Soft motion gives the torque history with the lowest number of shootings (section 6)."
@@ -238,15 +339,17 @@ pub fn compute(
                     > robot.joints()[i].limits.acceleration * (1.0 + super::cases::LIMIT_TOL)
             })
             .map(|i| {
+                let u = Units::of(robot, i);
                 format!(
-                    "j{} {:.3} > {:.3} deg/s²",
+                    "j{} {:.3} > {:.3} {}",
                     i + 1,
-                    c.peaks.acceleration[i] * RAD2DEG,
-                    robot.joints()[i].limits.acceleration * RAD2DEG
+                    c.peaks.acceleration[i] * u.scale(),
+                    robot.joints()[i].limits.acceleration * u.scale(),
+                    u.display(2)
                 )
             })
             .collect();
-        out.push(Verdict {
+        out.push(Measured {
             id: "cubic_exceeds_acceleration",
             claim: format!(
                 "In one segment the cubic needs more acceleration than the joints allow (section 5.2.1, eq. 21; the seed prints 0.62 against 0.6 deg/s²), at tf = {} s.",
@@ -277,14 +380,17 @@ pub fn compute(
         .sum::<f64>()
         .max(1e-3);
     let z_holds = z.iter().all(|v| *v <= 1e-9 * scale);
-    out.push(Verdict {
+    out.push(Measured {
         id: "z_unaffected_by_joints_1_2",
         claim: "The end-effector's differential translation along Z does not depend on joints 1 and 2 (section 2.4.4, Figure 12 a-b).".into(),
         finding: format!(
-            "max |∂Pz/∂θ| over the sweeps and 2000 random configurations: {} mm/rad.",
+            "max |∂Pz/∂q| over the sweeps and 2000 random configurations: {}.",
             z.iter()
                 .enumerate()
-                .map(|(j, v)| format!("joint {} {:.3e}", j + 1, v * 1e3))
+                .map(|(j, v)| {
+                    let u = Units::of(robot, j);
+                    format!("joint {} {:.3e} {}", j + 1, v * u.jacobian_scale(), u.jacobian())
+                })
                 .collect::<Vec<_>>()
                 .join(", ")
         ),
@@ -296,14 +402,13 @@ pub fn compute(
         .map(|a| max_jacobian_element(robot, sweeps, last, a))
         .fold(0.0, f64::max);
     let lin_holds = lin <= 1e-9 * scale;
-    out.push(Verdict {
+    out.push(Measured {
         id: "last_joint_does_not_translate_tool",
-        claim: format!(
-            "Joint {dof} does not move the end effector in X, Y or Z (section 2.4.4: its frame is aligned with the tool frame)."
-        ),
+        claim: "Joint 6, the last, does not move the end effector in X, Y or Z (section 2.4.4: its frame is aligned with the tool frame).".into(),
         finding: format!(
-            "max |∂P/∂θ{dof}| over the sweeps and 2000 random configurations: {:.3e} mm/rad.",
-            lin * 1e3
+            "max |∂P/∂q{dof}| over the sweeps and 2000 random configurations: {:.3e} {}.",
+            lin * Units::of(robot, last).jacobian_scale(),
+            Units::of(robot, last).jacobian()
         ),
         holds: lin_holds,
         value: format!("{lin_holds}"),
@@ -312,25 +417,27 @@ pub fn compute(
     // 9. The quintic at the longest tf goes back and forth.
     if let Some(c) = case(Method::Quintic, t_long) {
         let rev = c.stats.reversals.first().copied().unwrap_or(0);
+        let u = Units::of(robot, 0);
+        let (sc, pu) = (u.scale(), u.display(0));
         // Joint 1's turning points: where its sampled velocity changes sign.
         let turns: Vec<String> =
             c.qd.windows(2)
                 .zip(c.q.iter().skip(1))
                 .filter(|(w, _)| w[0][0] * w[1][0] < 0.0)
-                .map(|(_, q)| format!("{:.1}°", q[0] * RAD2DEG))
+                .map(|(_, q)| format!("{:.1} {pu}", q[0] * sc))
                 .collect();
-        out.push(Verdict {
+        out.push(Measured {
             id: "quintic_long_time_reverses",
             claim: format!(
                 "With the quintic at tf = {t_long} s joint 1 does not move monotonically: it rises to 40°, falls to −40°, then reaches θf (section 5.2.2)."
             ),
             finding: format!(
-                "Joint 1's velocity changes sign {rev} times (turning at {}); its position spans [{:.2}°, {:.2}°] (θi = {:.2}°, θf = {:.2}°).",
+                "Joint 1's velocity changes sign {rev} times (turning at {}); its position spans [{:.2}, {:.2}] {pu} (θi = {:.2}, θf = {:.2} {pu}).",
                 if turns.is_empty() { "no point".to_string() } else { turns.join(", ") },
-                c.peaks.position_min[0] * RAD2DEG,
-                c.peaks.position_max[0] * RAD2DEG,
-                motion.start[0] * RAD2DEG,
-                motion.target[0] * RAD2DEG
+                c.peaks.position_min[0] * sc,
+                c.peaks.position_max[0] * sc,
+                motion.start[0] * sc,
+                motion.target[0] * sc
             ),
             holds: rev > 0,
             value: format!("{rev}"),
@@ -362,12 +469,25 @@ pub fn compute(
                 .unwrap_or_else(|| "within limits".into())
         ));
     }
-    out.push(Verdict {
+    out.push(Measured {
         id: "selected_final_times_feasible",
         claim: "The final times the seed selects by inspection (cubic 60 s, quintic 5 s, LSPB 60 s, soft motion 5 s) are suitable (sections 5.2.1-5.2.4).".into(),
         finding: format!("{}.", parts.join("; ")),
         holds: all_ok,
         value: format!("{all_ok}"),
     });
-    out
+    out.into_iter()
+        .map(|m| Verdict {
+            id: m.id,
+            claim: m.claim,
+            finding: m.finding,
+            holds: not_seed.is_none().then_some(m.holds),
+            status: match (not_seed, m.holds) {
+                (Some(_), _) => Status::NotApplicable,
+                (None, true) => Status::Confirmed,
+                (None, false) => Status::Refuted,
+            },
+            value: m.value,
+        })
+        .collect()
 }

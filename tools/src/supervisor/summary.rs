@@ -87,6 +87,46 @@ impl ProgramSummary {
     }
 }
 
+/// One joint's figures, in the units of its type: a revolute joint's in rad and
+/// N·m, a prismatic joint's in m and N (the other pair is absent).
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct JointSummary {
+    pub name: String,
+    /// "revolute" or "prismatic".
+    pub kind: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracking_error_max_rad: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracking_error_max_m: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_torque_nm: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_force_n: Option<f64>,
+}
+
+impl JointSummary {
+    fn new(name: &str, prismatic: bool, tracking_error: f64, peak_effort: f64) -> Self {
+        let mut j = JointSummary {
+            name: name.to_string(),
+            ..JointSummary::default()
+        };
+        if prismatic {
+            j.kind = "prismatic".into();
+            j.tracking_error_max_m = Some(tracking_error);
+            j.peak_force_n = Some(peak_effort);
+        } else {
+            j.kind = "revolute".into();
+            j.tracking_error_max_rad = Some(tracking_error);
+            j.peak_torque_nm = Some(peak_effort);
+        }
+        j
+    }
+
+    fn prismatic(&self) -> bool {
+        self.kind == "prismatic"
+    }
+}
+
 /// Everything `microrobot run` reports at the end.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Summary {
@@ -121,10 +161,16 @@ pub struct Summary {
     pub e2e_latency_us: Percentiles,
     /// Planner wake-up − ideal tick time.
     pub planner_lateness_us: Percentiles,
-    /// max |q_measured − q_setpoint| per joint (rad or m).
-    pub tracking_error_max_rad: Vec<f64>,
-    /// max |τ| commanded per joint (N·m or N).
-    pub peak_torque_nm: Vec<f64>,
+    /// Per joint, its tracking error and peak effort keyed in its type's units.
+    #[serde(default)]
+    pub joints: Vec<JointSummary>,
+    /// max |q_measured − q_setpoint| per joint (rad); only when every joint is
+    /// revolute (else see `joints`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracking_error_max_rad: Option<Vec<f64>>,
+    /// max |τ| commanded per joint (N·m); only when every joint is revolute.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_torque_nm: Option<Vec<f64>>,
     /// E-stop commands the planner executed.
     pub estops: u64,
     /// Receipt of the last e-stop command → its first braking setpoint (µs; null: none).
@@ -230,6 +276,8 @@ pub struct RunFacts {
     pub feedback: bool,
     pub wall_time_s: f64,
     pub dof: usize,
+    /// Each joint's name and whether it is prismatic.
+    pub joints: Vec<(String, bool)>,
     pub run_dir: String,
 }
 
@@ -302,6 +350,7 @@ impl Summary {
         } else {
             &dynamics
         };
+        let all_revolute = !facts.joints.iter().any(|(_, p)| *p);
         Self {
             instance: facts.instance,
             exit_ok: facts.exit_code == 0,
@@ -323,8 +372,23 @@ impl Summary {
             restarts: restarts.iter().sum(),
             e2e_latency_us: Percentiles::from(&actuator.latency),
             planner_lateness_us: Percentiles::from(&planner.latency),
-            tracking_error_max_rad: tracking_src.tracking_error_max[..dof].to_vec(),
-            peak_torque_nm: dynamics.peak_torque[..dof].to_vec(),
+            joints: (0..dof)
+                .map(|i| {
+                    let (name, prismatic) = facts
+                        .joints
+                        .get(i)
+                        .map_or((format!("j{}", i + 1), false), |(n, p)| (n.clone(), *p));
+                    JointSummary::new(
+                        &name,
+                        prismatic,
+                        tracking_src.tracking_error_max[i],
+                        dynamics.peak_torque[i],
+                    )
+                })
+                .collect(),
+            tracking_error_max_rad: all_revolute
+                .then(|| tracking_src.tracking_error_max[..dof].to_vec()),
+            peak_torque_nm: all_revolute.then(|| dynamics.peak_torque[..dof].to_vec()),
             estops: planner.estops,
             estop_latency_us: (planner.estop_latency_ns > 0)
                 .then(|| planner.estop_latency_ns as f64 / 1e3),
@@ -420,22 +484,42 @@ impl Summary {
             self.services.get("dynamics").map_or(0.0, |v| v.cpu_percent),
             self.services.get("actuator").map_or(0.0, |v| v.cpu_percent),
         );
-        let fmt = |v: &[f64], scale: f64, prec: usize| {
-            v.iter()
-                .map(|x| format!("{:.*}", prec, x * scale))
-                .collect::<Vec<_>>()
-                .join(", ")
+        // Each joint in its type's unit: mrad and N·m, or mm and N.
+        let all_revolute = !self.joints.iter().any(JointSummary::prismatic);
+        let list = |f: &dyn Fn(&JointSummary) -> String| {
+            self.joints.iter().map(f).collect::<Vec<_>>().join(", ")
         };
-        let _ = writeln!(
-            s,
-            "  tracking error max: [{}] mrad",
-            fmt(&self.tracking_error_max_rad, 1e3, 4)
-        );
-        let _ = writeln!(
-            s,
-            "  peak torque:        [{}] N·m",
-            fmt(&self.peak_torque_nm, 1.0, 3)
-        );
+        if all_revolute {
+            let _ = writeln!(
+                s,
+                "  tracking error max: [{}] mrad",
+                list(&|j| format!("{:.4}", j.tracking_error_max_rad.unwrap_or(0.0) * 1e3))
+            );
+            let _ = writeln!(
+                s,
+                "  peak torque:        [{}] N·m",
+                list(&|j| format!("{:.3}", j.peak_torque_nm.unwrap_or(0.0)))
+            );
+        } else {
+            let _ = writeln!(
+                s,
+                "  tracking error max: [{}]",
+                list(
+                    &|j| match (j.tracking_error_max_rad, j.tracking_error_max_m) {
+                        (Some(r), _) => format!("{:.4} mrad", r * 1e3),
+                        (_, m) => format!("{:.4} mm", m.unwrap_or(0.0) * 1e3),
+                    }
+                )
+            );
+            let _ = writeln!(
+                s,
+                "  peak torque/force:  [{}]",
+                list(&|j| match (j.peak_torque_nm, j.peak_force_n) {
+                    (Some(t), _) => format!("{t:.3} N·m"),
+                    (_, f) => format!("{:.3} N", f.unwrap_or(0.0)),
+                })
+            );
+        }
         if let (Some(last), Some(max)) = (self.estop_latency_us, self.estop_latency_max_us) {
             let _ = writeln!(
                 s,
@@ -476,5 +560,67 @@ impl Summary {
             }
         );
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn facts(joints: &[(&str, bool)]) -> RunFacts {
+        RunFacts {
+            instance: "t".into(),
+            exit_code: 0,
+            failures: Vec::new(),
+            program: None,
+            stop_reason: "program_done".into(),
+            rate_hz: 1000.0,
+            lockstep: true,
+            feedback: true,
+            wall_time_s: 1.0,
+            dof: joints.len(),
+            joints: joints.iter().map(|(n, p)| (n.to_string(), *p)).collect(),
+            run_dir: "/tmp".into(),
+        }
+    }
+
+    #[test]
+    fn a_prismatic_joint_is_summarised_in_m_and_n() {
+        let mut dynamics = ServiceStatus::default();
+        dynamics.peak_torque[0] = 2.0;
+        dynamics.peak_torque[1] = 150.0;
+        dynamics.tracking_error_max[1] = 0.002;
+        let totals = [None, Some(dynamics), None];
+        let exits = [String::new(), String::new(), String::new()];
+        let rrp = Summary::build(
+            facts(&[("yaw", false), ("boom", true)]),
+            &totals,
+            &[0; 3],
+            &exits,
+        );
+        let json = serde_json::to_value(&rrp).expect("json");
+        assert!(json.get("peak_torque_nm").is_none(), "{json}");
+        assert!(json.get("tracking_error_max_rad").is_none(), "{json}");
+        let boom = &json["joints"][1];
+        assert_eq!(boom["kind"], "prismatic");
+        assert_eq!(boom["peak_force_n"], 150.0);
+        assert_eq!(boom["tracking_error_max_m"], 0.002);
+        assert!(
+            boom.get("peak_torque_nm").is_none() && boom.get("tracking_error_max_rad").is_none()
+        );
+        assert_eq!(json["joints"][0]["peak_torque_nm"], 2.0);
+        let text = rrp.render();
+        assert!(text.contains("2.000 N·m, 150.000 N"), "{text}");
+        assert!(text.contains("2.0000 mm"), "{text}");
+        // An all-revolute arm keeps its per-joint arrays.
+        let rr = Summary::build(
+            facts(&[("a", false), ("b", false)]),
+            &totals,
+            &[0; 3],
+            &exits,
+        );
+        let json = serde_json::to_value(&rr).expect("json");
+        assert_eq!(json["peak_torque_nm"][1], 150.0);
+        assert!(rr.render().contains("[2.000, 150.000] N·m"));
     }
 }
