@@ -38,9 +38,9 @@ pub mod teleop;
 pub use stage::run;
 
 use microrobot_messages::{
-    Activity, CommandKind, Header, JointSetpoint, JointState as BusState, LifecycleState,
-    MAX_JOINTS, MasterPose, MotionCommand, ProfileKind, ProgramEnd, ProgramState, RefusalQuantity,
-    RefusalReason, TargetSpace, setpoint_flags, state_flags,
+    Activity as ReportedActivity, CommandKind, Header, JointSetpoint, JointState as BusState,
+    LifecycleState, MAX_JOINTS, MasterPose, MotionCommand, ProfileKind, ProgramEnd, ProgramState,
+    RefusalQuantity, RefusalReason, TargetSpace, setpoint_flags, state_flags,
 };
 use microrobot_model::ik::{IkOptions, IkTarget};
 use microrobot_model::{ModelData, Robot};
@@ -222,7 +222,8 @@ impl CommandError {
 /// config's); the config's scales have the same floor.
 pub use microrobot_runtime::config::MIN_LIMIT_SCALE;
 
-/// What the planner is doing.
+/// What the planner is doing, as a plain label ([`PlannerCore::mode`]); the state
+/// itself, with what each activity needs, is [`Activity`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
     /// Holding a constant position.
@@ -237,6 +238,59 @@ pub enum Mode {
     SafeHold,
     /// The master device drives the arm.
     Teleop,
+}
+
+/// The planner's state machine: what it is doing, with the motion that does it. Every
+/// transition replaces the whole activity, so no flag can disagree with another.
+///
+/// `AwaitingState` → (first measured state) `Program` | `Hold` | `Stopping` (the arm was
+/// moving) | `SafeHold` (the actuator is latched) | `Teleop` (`[teleop] enabled`);
+/// `Program`, `Move`, `Stopping` → `Hold` at their end; any → `Stopping` (Stop, stale
+/// state), `EStop` (EStop), `SafeHold` (the actuator reports its safe state);
+/// `EStop` → `Hold` on Reset at rest; `SafeHold` → `Stopping` once reset and the
+/// actuator has left its safe state; `Hold` → `Move` | `Teleop` on command.
+#[derive(Debug, Clone, Copy)]
+enum Activity {
+    /// No measured state yet: nothing to plan from.
+    AwaitingState,
+    /// Holding a constant position, at rest.
+    Hold,
+    /// The configured program drives the setpoint ([`PlannerCore`]'s `program`).
+    Program,
+    /// A commanded move.
+    Move(Generator),
+    /// Braking to rest: a Stop, a stale state, a start on a moving arm, a resume.
+    Stopping(Generator),
+    /// An e-stop: braking (`brake`), then holding; motion is refused until a Reset,
+    /// which lifts it at rest (`reset_at_rest`: it came while still braking).
+    EStop {
+        brake: Option<Generator>,
+        reset_at_rest: bool,
+    },
+    /// The actuator is in its safe state: the setpoint follows the measured state;
+    /// `resume` once a Reset came (then, or with `auto_resume`, the planner resumes as
+    /// soon as the actuator leaves its safe state).
+    SafeHold { resume: bool },
+    /// The master device drives the arm.
+    Teleop,
+}
+
+impl Activity {
+    /// The motion being run by a generator, if any (the program runs its own).
+    fn generator(&mut self) -> Option<&mut Generator> {
+        match self {
+            Self::Move(g) | Self::Stopping(g) => Some(g),
+            Self::EStop { brake, .. } => brake.as_mut(),
+            _ => None,
+        }
+    }
+
+    fn has_motion(&self) -> bool {
+        matches!(
+            self,
+            Self::Move(_) | Self::Stopping(_) | Self::EStop { brake: Some(_), .. }
+        )
+    }
 }
 
 /// Cumulative counters of the planner.
@@ -266,16 +320,13 @@ pub struct PlannerCore {
     limits: KinematicLimits,
     full_limits: KinematicLimits,
     estop_limits: KinematicLimits,
-    motion: Option<Generator>,
-    program_running: bool,
     current: Sample,
-    mode: Mode,
+    activity: Activity,
     program: Option<ProgramRunner>,
     program_done: bool,
     /// Where the configured program stands, and why it ended early (for the status).
     program_state: ProgramState,
     program_end: ProgramEnd,
-    started: bool,
     tick: u64,
     state_seq: SeqTracker,
     last_state: Option<BusState>,
@@ -286,10 +337,6 @@ pub struct PlannerCore {
     /// Why the last refused measured state was refused.
     pub last_state_refusal: Option<Refusal>,
     estop_at_ns: Option<u64>,
-    /// A Reset arrived while the e-stop was still braking: lift the e-stop at rest.
-    reset_after_brake: bool,
-    /// A Reset arrived in [`Mode::SafeHold`]: resume when the actuator leaves its safe state.
-    resume_pending: bool,
     /// `watchdog.auto_resume`: resume without a Reset when the actuator does.
     auto_resume: bool,
     /// Time from the last e-stop command's receipt to its first braking setpoint (ns).
@@ -297,6 +344,7 @@ pub struct PlannerCore {
     /// The largest such time so far (ns).
     pub max_estop_latency_ns: u64,
     teleop: teleop::TeleopMode,
+    /// `[teleop] enabled`: start in teleop.
     teleop_at_start: bool,
     /// The measured state was stale at the last check (teleop holds meanwhile).
     state_stale: bool,
@@ -334,10 +382,8 @@ impl PlannerCore {
             limits: scaled(robot, cfg.planner.limit_scale),
             full_limits: scaled(robot, 1.0),
             estop_limits: scaled(robot, cfg.planner.estop_limit_scale),
-            motion: None,
-            program_running: false,
             current: Sample::default(),
-            mode: Mode::Hold,
+            activity: Activity::AwaitingState,
             program_done: program.is_none(),
             program_state: if program.is_some() {
                 ProgramState::Pending
@@ -346,7 +392,6 @@ impl PlannerCore {
             },
             program_end: ProgramEnd::None,
             program,
-            started: false,
             tick: 0,
             state_seq: SeqTracker::new(cfg.watchdog.stale_ns()),
             last_state: None,
@@ -354,8 +399,6 @@ impl PlannerCore {
             last_error: None,
             last_state_refusal: None,
             estop_at_ns: None,
-            reset_after_brake: false,
-            resume_pending: false,
             auto_resume: cfg.watchdog.auto_resume,
             last_estop_latency_ns: None,
             max_estop_latency_ns: 0,
@@ -376,19 +419,25 @@ impl PlannerCore {
         self.teleop.on_master(m, publisher, now_ns)
     }
 
-    fn enter_teleop(&mut self) -> Result<(), CommandError> {
+    fn enter_teleop(&mut self) -> Result<Activity, CommandError> {
         self.teleop
             .enter(&self.current)
             .map_err(CommandError::TeleopUnavailable)?;
-        self.mode = Mode::Teleop;
         self.program_done = false;
         tracing::info!("planner: teleop mode: the master device drives the arm");
-        Ok(())
+        Ok(Activity::Teleop)
     }
 
-    /// Current mode.
+    /// Current mode (before the first measured state: `Hold`).
     pub fn mode(&self) -> Mode {
-        self.mode
+        match self.activity {
+            Activity::AwaitingState | Activity::Hold => Mode::Hold,
+            Activity::Program | Activity::Move(_) => Mode::Moving,
+            Activity::Stopping(_) => Mode::Stopping,
+            Activity::EStop { .. } => Mode::EStop,
+            Activity::SafeHold { .. } => Mode::SafeHold,
+            Activity::Teleop => Mode::Teleop,
+        }
     }
 
     /// Whether the program (if any) has finished or was abandoned, and the arm is at rest.
@@ -397,18 +446,16 @@ impl PlannerCore {
     }
 
     /// What the planner is doing, as the status reports it.
-    pub fn activity(&self) -> Activity {
-        if !self.started {
-            return Activity::Starting;
-        }
-        match self.mode {
-            Mode::Hold => Activity::Hold,
-            Mode::Moving if self.program_running => Activity::Program,
-            Mode::Moving => Activity::Move,
-            Mode::Stopping => Activity::Stopping,
-            Mode::EStop => Activity::EStop,
-            Mode::SafeHold => Activity::SafeHold,
-            Mode::Teleop => Activity::Teleop,
+    pub fn activity(&self) -> ReportedActivity {
+        match self.activity {
+            Activity::AwaitingState => ReportedActivity::Starting,
+            Activity::Hold => ReportedActivity::Hold,
+            Activity::Program => ReportedActivity::Program,
+            Activity::Move(_) => ReportedActivity::Move,
+            Activity::Stopping(_) => ReportedActivity::Stopping,
+            Activity::EStop { .. } => ReportedActivity::EStop,
+            Activity::SafeHold { .. } => ReportedActivity::SafeHold,
+            Activity::Teleop => ReportedActivity::Teleop,
         }
     }
 
@@ -420,7 +467,6 @@ impl PlannerCore {
 
     /// The program will not run (or run on): `state` with `why`, logged once.
     fn end_program(&mut self, state: ProgramState, why: ProgramEnd) {
-        self.program_running = false;
         if self.program.take().is_some() {
             self.program_state = state;
             self.program_end = why;
@@ -440,7 +486,7 @@ impl PlannerCore {
 
     /// Whether the first measured state has been seen.
     pub fn started(&self) -> bool {
-        self.started
+        !matches!(self.activity, Activity::AwaitingState)
     }
 
     /// Sequence gaps seen on the state stream.
@@ -480,59 +526,70 @@ impl PlannerCore {
             return false;
         }
         self.last_state = Some(*s);
-        if self.started && self.counters.ticks == 0 && self.mode == Mode::Stopping {
-            // Started on a moving arm and not ticked yet: stop from the newest measured
-            // state (the actuator's own hold changes it meanwhile).
-            if let Some(m) = self.measured_sample() {
-                let prev = self.current;
-                self.current = Sample {
-                    q: m.q,
-                    qd: m.qd,
-                    ..Default::default()
-                };
-                if self.brake(false).is_err() {
-                    self.current = prev;
+        match self.activity {
+            Activity::AwaitingState => self.activity = self.start(s),
+            Activity::Stopping(_) if self.counters.ticks == 0 => {
+                // Started on a moving arm and not ticked yet: stop from the newest
+                // measured state (the actuator's own hold changes it meanwhile).
+                if let Some(m) = self.measured_sample() {
+                    let prev = self.current;
+                    self.current = Sample {
+                        q: m.q,
+                        qd: m.qd,
+                        ..Default::default()
+                    };
+                    match self.brake(false) {
+                        Ok(g) => self.activity = Activity::Stopping(g),
+                        Err(_) => self.current = prev,
+                    }
                 }
             }
-        }
-        if !self.started {
-            self.started = true;
-            // Start from the measured state, velocity included: a restarted planner can
-            // find the arm still moving (held or damped by the actuator), and a
-            // setpoint at rest there would be a velocity jump.
-            let Some(m) = self.measured_sample() else {
-                return true;
-            };
-            // At rest below START_REST_QD (sensor noise): start exactly at rest.
-            let moving = (0..self.dof).any(|i| m.qd[i].abs() > START_REST_QD);
-            self.current = Sample {
-                q: m.q,
-                qd: if moving { m.qd } else { JointVector::zeros() },
-                ..Default::default()
-            };
-            let safe = s.flags & state_flags::SAFE_STATE != 0
-                || s.lifecycle == LifecycleState::Fault as u32;
-            if safe {
-                // The actuator is latched: mirror the measured arm from the first tick
-                // (as `check_state` would from the next one).
-                self.end_program(ProgramState::NotRun, ProgramEnd::SafeState);
-                self.mode = Mode::SafeHold;
-            } else if moving {
-                // Bring the arm to rest from where it is (jerk-limited, bumpless).
-                self.end_program(ProgramState::NotRun, ProgramEnd::MovingAtStart);
-                if self.brake(false).is_err() {
-                    self.current.qd = JointVector::zeros();
-                }
-            } else if self.teleop_at_start {
-                self.end_program(ProgramState::NotRun, ProgramEnd::TeleopAtStart);
-                if let Err(e) = self.enter_teleop() {
-                    tracing::error!("planner: cannot start in teleop mode: {e}");
-                }
-            } else {
-                self.start_program();
-            }
+            _ => {}
         }
         true
+    }
+
+    /// The first measured state `s` (already taken as `last_state`): where and how the
+    /// planner starts. From the measured state, velocity included: a restarted planner
+    /// can find the arm still moving (held or damped by the actuator), and a setpoint
+    /// at rest there would be a velocity jump.
+    fn start(&mut self, s: &BusState) -> Activity {
+        let Some(m) = self.measured_sample() else {
+            return Activity::AwaitingState;
+        };
+        // At rest below START_REST_QD (sensor noise): start exactly at rest.
+        let moving = (0..self.dof).any(|i| m.qd[i].abs() > START_REST_QD);
+        self.current = Sample {
+            q: m.q,
+            qd: if moving { m.qd } else { JointVector::zeros() },
+            ..Default::default()
+        };
+        let safe =
+            s.flags & state_flags::SAFE_STATE != 0 || s.lifecycle == LifecycleState::Fault as u32;
+        if safe {
+            // The actuator is latched: mirror the measured arm from the first tick
+            // (as `check_state` would from the next one).
+            self.end_program(ProgramState::NotRun, ProgramEnd::SafeState);
+            Activity::SafeHold { resume: false }
+        } else if moving {
+            // Bring the arm to rest from where it is (jerk-limited, bumpless).
+            self.end_program(ProgramState::NotRun, ProgramEnd::MovingAtStart);
+            match self.brake(false) {
+                Ok(g) => Activity::Stopping(g),
+                Err(_) => {
+                    self.current.qd = JointVector::zeros();
+                    Activity::Hold
+                }
+            }
+        } else if self.teleop_at_start {
+            self.end_program(ProgramState::NotRun, ProgramEnd::TeleopAtStart);
+            self.enter_teleop().unwrap_or_else(|e| {
+                tracing::error!("planner: cannot start in teleop mode: {e}");
+                Activity::Hold
+            })
+        } else {
+            self.start_program()
+        }
     }
 
     fn measured_sample(&self) -> Option<Sample> {
@@ -546,9 +603,9 @@ impl PlannerCore {
         Some(out)
     }
 
-    fn start_program(&mut self) {
+    fn start_program(&mut self) -> Activity {
         let Some(p) = self.program.as_mut() else {
-            return;
+            return Activity::Hold;
         };
         match p.plan(&self.robot, &self.current.state(), &self.limits) {
             Ok(()) => {
@@ -557,9 +614,8 @@ impl PlannerCore {
                     p.name(),
                     p.duration()
                 );
-                self.program_running = true;
                 self.program_state = ProgramState::Running;
-                self.mode = Mode::Moving;
+                Activity::Program
             }
             Err(e) => {
                 tracing::error!(
@@ -568,6 +624,7 @@ impl PlannerCore {
                 self.program = None;
                 self.program_state = ProgramState::NotRun;
                 self.program_end = ProgramEnd::CannotPlan;
+                Activity::Hold
             }
         }
     }
@@ -576,7 +633,9 @@ impl PlannerCore {
         self.end_program(ProgramState::Abandoned, why);
     }
 
-    fn brake(&mut self, estop: bool) -> Result<(), CommandError> {
+    /// The shortest jerk-limited stop from the current setpoint state, within the
+    /// robot's limits or (`estop`) the e-stop's.
+    fn brake(&self, estop: bool) -> Result<Generator, CommandError> {
         let lim = if estop {
             self.estop_limits
         } else {
@@ -584,9 +643,7 @@ impl PlannerCore {
         };
         let t =
             stop_trajectory(self.dof, &self.current.state(), &lim).map_err(CommandError::Limits)?;
-        self.motion = Some(Generator::new(t));
-        self.mode = if estop { Mode::EStop } else { Mode::Stopping };
-        Ok(())
+        Ok(Generator::new(t))
     }
 
     /// Validates and executes a motion command received at `now_ns`.
@@ -612,63 +669,66 @@ impl PlannerCore {
                 age_ms: (now_ns as f64 - c.stamp_ns as f64) / 1e6,
             });
         }
-        if !self.started {
+        if !self.started() {
             return Err(CommandError::NotStarted);
         }
         match kind {
             CommandKind::Reset => {
-                match self.mode {
-                    Mode::EStop if self.motion.is_some() => {
-                        // Still braking: cutting the brake short would step the setpoint
-                        // velocity and acceleration to zero. The brake runs to rest and
-                        // `tick` lifts the e-stop there.
-                        self.reset_after_brake = true;
-                    }
-                    Mode::EStop => {
-                        // At rest (the brake's end holds qd = qdd = jerk = 0 exactly).
-                        self.mode = Mode::Hold;
-                    }
-                    Mode::SafeHold => {
-                        // Resume once the actuator has left its safe state (it takes
-                        // the same reset): see `check_state`.
-                        self.resume_pending = true;
-                    }
-                    _ => {}
-                }
+                self.activity = match self.activity {
+                    // Still braking: cutting the brake short would step the setpoint
+                    // velocity and acceleration to zero. The brake runs to rest and
+                    // `tick` lifts the e-stop there.
+                    Activity::EStop { brake: Some(g), .. } => Activity::EStop {
+                        brake: Some(g),
+                        reset_at_rest: true,
+                    },
+                    // At rest (the brake's end holds qd = qdd = jerk = 0 exactly).
+                    Activity::EStop { brake: None, .. } => Activity::Hold,
+                    // Resume once the actuator has left its safe state (it takes the
+                    // same reset): see `check_state`.
+                    Activity::SafeHold { .. } => Activity::SafeHold { resume: true },
+                    other => other,
+                };
                 Ok(())
             }
             CommandKind::EStop => {
                 self.counters.estops += 1;
-                self.reset_after_brake = false;
                 self.estop_at_ns = Some(now_ns);
                 self.abandon_program(ProgramEnd::Command);
-                if self.mode == Mode::SafeHold {
+                if let Activity::SafeHold { .. } = self.activity {
                     // The actuator already holds; stay with it, but remember the e-stop.
                     return Ok(());
                 }
-                self.brake(true)
+                self.activity = Activity::EStop {
+                    brake: Some(self.brake(true)?),
+                    reset_at_rest: false,
+                };
+                Ok(())
             }
             CommandKind::Stop => {
                 self.check_motion_allowed()?;
                 self.abandon_program(ProgramEnd::Command);
-                self.brake(false)
+                self.activity = Activity::Stopping(self.brake(false)?);
+                Ok(())
             }
             CommandKind::Teleop => {
                 self.check_motion_allowed()?;
-                if self.mode == Mode::Teleop {
-                    return Ok(());
+                match self.activity {
+                    Activity::Teleop => Ok(()),
+                    Activity::Program | Activity::Move(_) | Activity::Stopping(_) => {
+                        Err(CommandError::TeleopNotAtRest)
+                    }
+                    _ => {
+                        self.activity = self.enter_teleop()?;
+                        Ok(())
+                    }
                 }
-                if self.motion.is_some() || self.program_running {
-                    return Err(CommandError::TeleopNotAtRest);
-                }
-                self.enter_teleop()
             }
             CommandKind::Move => {
                 self.check_motion_allowed()?;
                 let t = self.plan_move(c)?;
                 self.abandon_program(ProgramEnd::Command);
-                self.motion = Some(Generator::new(t));
-                self.mode = Mode::Moving;
+                self.activity = Activity::Move(Generator::new(t));
                 self.program_done = false;
                 Ok(())
             }
@@ -676,9 +736,9 @@ impl PlannerCore {
     }
 
     fn check_motion_allowed(&self) -> Result<(), CommandError> {
-        match self.mode {
-            Mode::EStop => Err(CommandError::EStopActive),
-            Mode::SafeHold => Err(CommandError::SafeStateActive),
+        match self.activity {
+            Activity::EStop { .. } => Err(CommandError::EStopActive),
+            Activity::SafeHold { .. } => Err(CommandError::SafeStateActive),
             _ => Ok(()),
         }
     }
@@ -807,46 +867,76 @@ impl PlannerCore {
         };
         let safe =
             s.flags & state_flags::SAFE_STATE != 0 || s.lifecycle == LifecycleState::Fault as u32;
-        if !safe && self.mode == Mode::SafeHold && (self.resume_pending || self.auto_resume) {
-            // The actuator follows commands again: bring the followed measured state to
-            // rest, jerk-limited (bumpless from where the arm is).
-            self.resume_pending = false;
-            if self.brake(false).is_ok() {
-                tracing::info!(
-                    "planner: the actuator left its safe state; resuming from the measured state"
-                );
+        match (self.activity, safe) {
+            (Activity::SafeHold { resume }, false) if resume || self.auto_resume => {
+                // The actuator follows commands again: bring the followed measured state
+                // to rest, jerk-limited (bumpless from where the arm is).
+                self.activity = match self.brake(false) {
+                    Ok(g) => {
+                        tracing::info!(
+                            "planner: the actuator left its safe state; resuming from the measured state"
+                        );
+                        Activity::Stopping(g)
+                    }
+                    Err(_) => Activity::SafeHold { resume: false },
+                };
+                return;
             }
-            return;
-        }
-        if safe {
-            if self.mode != Mode::SafeHold {
-                self.resume_pending = false;
+            (Activity::SafeHold { .. }, true) => return,
+            (_, true) => {
                 tracing::warn!(
                     "planner: the actuator reports its safe state; following the measured state"
                 );
                 self.abandon_program(ProgramEnd::SafeState);
-                self.motion = None;
-                self.reset_after_brake = false;
-                self.mode = Mode::SafeHold;
+                self.activity = Activity::SafeHold { resume: false };
+                return;
             }
-            return;
+            _ => {}
         }
         self.state_stale =
             !self.lockstep && check_fresh(s.header.stamp_ns, now_ns, self.stale_ns).is_err();
-        if self.state_stale && self.mode == Mode::Teleop {
-            // Teleop holds (the tool is brought to rest) until the state is fresh again.
-            self.counters.stale_cycles += 1;
-        } else if !self.lockstep
-            && check_fresh(s.header.stamp_ns, now_ns, self.stale_ns).is_err()
-            && matches!(self.mode, Mode::Moving)
-        {
-            self.counters.stale_cycles += 1;
+        if !self.state_stale {
+            return;
+        }
+        // Teleop holds (the tool is brought to rest) until the state is fresh again.
+        self.counters.stale_cycles += 1;
+        if matches!(self.activity, Activity::Program | Activity::Move(_)) {
             tracing::warn!("planner: measured state is stale; stopping");
             self.abandon_program(ProgramEnd::StaleState);
-            let _ = self.brake(false);
-        } else if !self.lockstep && check_fresh(s.header.stamp_ns, now_ns, self.stale_ns).is_err() {
-            self.counters.stale_cycles += 1;
+            if let Ok(g) = self.brake(false) {
+                self.activity = Activity::Stopping(g);
+            }
         }
+    }
+
+    /// The running motion reached its end: hold exactly at rest there; the program is
+    /// finished, a move or stop holds, an e-stop holds (lifted if a Reset came during
+    /// its brake).
+    fn finish_motion(&mut self) {
+        self.current.qd = JointVector::zeros();
+        self.current.qdd = JointVector::zeros();
+        self.current.jerk = JointVector::zeros();
+        self.activity = match self.activity {
+            Activity::Program => {
+                self.program = None;
+                self.program_state = ProgramState::Finished;
+                tracing::info!("planner: program finished");
+                Activity::Hold
+            }
+            Activity::Move(_) | Activity::Stopping(_) => Activity::Hold,
+            Activity::EStop {
+                reset_at_rest: true,
+                ..
+            } => {
+                tracing::info!("planner: e-stop brake finished; reset takes effect");
+                Activity::Hold
+            }
+            Activity::EStop { .. } => Activity::EStop {
+                brake: None,
+                reset_at_rest: false,
+            },
+            other => other,
+        };
     }
 
     /// One tick: advances the motion by one period and returns the setpoint (stamped
@@ -855,67 +945,53 @@ impl PlannerCore {
         self.tick += 1;
         self.counters.ticks += 1;
         let mut flags = 0;
-        if self.mode == Mode::SafeHold {
-            if let Some(m) = self.measured_sample() {
-                self.current = m;
+        match &mut self.activity {
+            Activity::SafeHold { .. } => {
+                if let Some(m) = self.measured_sample() {
+                    self.current = m;
+                }
+                flags |= setpoint_flags::HOLD_FOR_SAFE_STATE;
             }
-            flags |= setpoint_flags::HOLD_FOR_SAFE_STATE;
-        } else if self.mode == Mode::Teleop {
-            if let Some((sample, bits)) = self.teleop.step(now_ns, self.state_stale) {
-                self.current = sample;
-                flags |= bits;
-                if (0..self.dof).any(|i| sample.qd[i] != 0.0 || sample.qdd[i] != 0.0) {
+            Activity::Teleop => {
+                if let Some((sample, bits)) = self.teleop.step(now_ns, self.state_stale) {
+                    self.current = sample;
+                    flags |= bits;
+                    if (0..self.dof).any(|i| sample.qd[i] != 0.0 || sample.qdd[i] != 0.0) {
+                        flags |= setpoint_flags::MOVING;
+                    }
+                }
+            }
+            activity => {
+                // The sample goes straight into `current` (no 256-byte return value).
+                let (dt, current) = (self.period_s, &mut self.current);
+                let step = match activity {
+                    Activity::Program => self
+                        .program
+                        .as_mut()
+                        .and_then(|p| p.update_into(dt, current)),
+                    a => a.generator().map(|g| g.update_into(dt, current)),
+                };
+                if step == Some(Status::Finished) {
+                    self.finish_motion();
+                }
+                if step.is_some() {
                     flags |= setpoint_flags::MOVING;
                 }
             }
-        } else {
-            // The sample goes straight into `current` (no 256-byte return value).
-            let (dt, current) = (self.period_s, &mut self.current);
-            let step = if self.program_running {
-                self.program
-                    .as_mut()
-                    .and_then(|p| p.update_into(dt, current))
-            } else {
-                self.motion.as_mut().map(|g| g.update_into(dt, current))
-            };
-            if let Some(status) = step {
-                flags |= setpoint_flags::MOVING;
-                if status == Status::Finished {
-                    self.motion = None;
-                    if self.program_running {
-                        self.program_running = false;
-                        self.program = None;
-                        self.program_state = ProgramState::Finished;
-                        tracing::info!("planner: program finished");
-                    }
-                    // Hold exactly at rest.
-                    self.current.qd = JointVector::zeros();
-                    self.current.qdd = JointVector::zeros();
-                    self.current.jerk = JointVector::zeros();
-                    if matches!(self.mode, Mode::Moving | Mode::Stopping) {
-                        self.mode = Mode::Hold;
-                    }
-                    if self.mode == Mode::EStop && self.reset_after_brake {
-                        self.reset_after_brake = false;
-                        self.mode = Mode::Hold;
-                        tracing::info!("planner: e-stop brake finished; reset takes effect");
-                    }
-                }
-            }
         }
-        match self.mode {
-            Mode::Stopping => flags |= setpoint_flags::STOPPING,
-            Mode::EStop => {
+        match self.activity {
+            Activity::Stopping(_) => flags |= setpoint_flags::STOPPING,
+            Activity::EStop { brake, .. } => {
                 flags |= setpoint_flags::ESTOP;
-                if self.motion.is_some() {
+                if brake.is_some() {
                     flags |= setpoint_flags::STOPPING;
                 }
             }
             _ => {}
         }
         if self.program.is_none()
-            && self.motion.is_none()
-            && !matches!(self.mode, Mode::SafeHold | Mode::Teleop)
+            && !self.activity.has_motion()
+            && !matches!(self.activity, Activity::SafeHold { .. } | Activity::Teleop)
         {
             self.program_done = true;
         }
@@ -925,7 +1001,7 @@ impl PlannerCore {
         // An e-stop in the actuator's safe state brakes nothing (the arm already holds):
         // only a braking setpoint is timed.
         if let Some(t) = self.estop_at_ns.take()
-            && self.mode == Mode::EStop
+            && matches!(self.activity, Activity::EStop { .. })
         {
             let l = now_ns.saturating_sub(t);
             self.last_estop_latency_ns = Some(l);
