@@ -126,7 +126,7 @@ def _check_layout():
 # ---------------------------------------------------------------- constants
 ROLE_ACTUATOR = 3
 LC_INACTIVE, LC_ACTIVE, LC_FAULT, LC_FINALIZED = 1, 2, 3, 4
-SF_SAFE_STATE, SF_COMMAND_STALE, SF_SATURATED, SF_SLOPE_LIMITED, SF_FINAL = 1, 2, 4, 8, 16
+SF_SAFE_STATE, SF_COMMAND_STALE, SF_SATURATED, SF_SLOPE_LIMITED, SF_FINAL, SF_STALLED = 1, 2, 4, 8, 16, 32
 CMD_RESET = 4
 R_WRONG_DOF, R_NON_FINITE, R_STALE, R_SAFE_STATE, R_ORDER, R_SECOND_PUB = 4, 5, 9, 11, 16, 19
 
@@ -266,6 +266,7 @@ class Driver:
         self.blend = 0.0             # 0 = torque stream, 1 = own hold law
         self.q_hold = list(self.q)
         self.damping_phase = False
+        self.stalled_from_seq = None    # set after a stall > stale_ms: hold until a torque from a later state
         # torque stream
         self.pub_id = None
         self.last_valid_rx_ns = None    # receipt time of the last valid torque
@@ -399,6 +400,11 @@ class Driver:
             age = rx - t.header.stamp_ns
             if age > c.stale_ms * 1e6 or -age > 1_000_000:
                 self.refuse(R_STALE)
+                if self.pub_id == pub and (self.last_torque_seq is None or t.header.seq > self.last_torque_seq):
+                    # refused, not lost: count gaps against it too (the page does not say)
+                    if self.last_torque_seq is not None:
+                        self.cnt["lost"] += t.header.seq - self.last_torque_seq - 1
+                    self.last_torque_seq = t.header.seq
                 return False
         if self.last_torque_seq is not None and t.header.seq <= self.last_torque_seq:
             self.refuse(R_ORDER)
@@ -483,10 +489,12 @@ class Driver:
                 self.track_max[i] = max(self.track_max[i], abs(self.q[i] - cmd.q_desired[i]))
         else:
             self.tick += 1
-        own = self.latched or stale
+        own = self.latched or stale or self.stalled_from_seq is not None
         if stale:
             flags |= SF_COMMAND_STALE
             self.cnt["stale"] += 1
+        if self.stalled_from_seq is not None:
+            flags |= SF_STALLED
         if own and self.blend == 0.0 and not self.latched:
             self.q_hold = list(self.q)     # hold where the torques stopped
         target = 1.0 if own else 0.0
@@ -566,6 +574,9 @@ class Driver:
                         self.step(t, new=True)
             elif taken:
                 newest = taken[-1][0]
+                if (self.stalled_from_seq is not None and newest.state_seq != U64_MAX
+                        and newest.state_seq >= self.stalled_from_seq):
+                    self.stalled_from_seq = None   # a torque computed after the stall
                 self.cmd, self.cmd_unanswered = newest, True
                 if not aligned:
                     # steps half a period after the planner's ticks
@@ -580,6 +591,12 @@ class Driver:
             if self.latched and c.auto_resume and self.fresh():
                 self.leave_safe_state()
             if now >= next_step:
+                if not c.lockstep and self.drives_on and now - next_step > c.stale_ms * 1e6:
+                    # stalled longer than stale_ms: missed periods are not replayed; hold
+                    # until a torque computed from a state after the stall arrives
+                    print(f"driver: stalled {(now - next_step) / 1e6:.1f} ms", file=sys.stderr, flush=True)
+                    next_step = now
+                    self.stalled_from_seq = self.state_seq + 1
                 if not self.drives_on:
                     self.state_pub.update_connections()
                     if not c.lockstep:
@@ -589,9 +606,7 @@ class Driver:
                     stale = (not c.lockstep and not self.latched
                              and now - self.last_valid_rx_ns >= c.stale_ms * 1e6)
                     self.step(self.cmd, new=self.cmd_unanswered, stale=stale)
-                next_step += self.period_ns
-                if now - next_step > 20 * self.period_ns:   # a long stall: do not replay it
-                    next_step = now + self.period_ns
+                next_step += self.period_ns     # shorter stalls are caught up step by step
             if now >= next_status:
                 self.publish_status()
                 next_status += int(c.status_period_ms * 1e6)
