@@ -85,7 +85,7 @@ fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
             let t = match topic.as_str() {
                 "transforms" => &v["transforms"][0]["timestamp"],
                 "scene" => &v["entities"][0]["timestamp"],
-                "joints" => &v["timestamp"],
+                "joints" | "log" => &v["timestamp"],
                 other => panic!("`{other}`: a message without its stamp"),
             };
             let wall =
@@ -347,6 +347,21 @@ fn lockstep_run_recorded_exported_plotted_and_replayed_bit_for_bit() {
     assert_eq!(scene["frame_id"], "base_link");
     let line = scene["lines"][0]["points"].as_array().expect("points");
     assert_eq!(line.len(), 1 + 6 + 1, "base, six joints, tool");
+    // Every service's log lines, as Foxglove's Log panel reads them: each service's
+    // start-up line at INFO (2), under the service's name, with the target of the line.
+    let logs = &topics["log"];
+    for role in ["planner", "dynamics", "actuator"] {
+        let started = logs.iter().find(|l| {
+            l["name"] == role
+                && l["level"] == 2
+                && l["message"]
+                    .as_str()
+                    .is_some_and(|m| m.starts_with(&format!("{role} starting: instance")))
+        });
+        let started =
+            started.unwrap_or_else(|| panic!("{role}'s start-up line in `log`: {logs:?}"));
+        assert_eq!(started["file"], "microrobot_runtime", "the line's target");
+    }
     let planner = s["cycles"]["planner"].as_u64().expect("planner cycles");
     let dynamics = s["cycles"]["dynamics"].as_u64().expect("dynamics cycles");
     assert!(planner > 100, "a 2 s lockstep run does many cycles: {s}");

@@ -52,11 +52,13 @@ with open(sys.argv[1], "rb") as f:
     for schema, channel, message in reader.iter_messages():
         names[channel.topic] = schema.name
         msg = json.loads(message.data)
-        if channel.topic in ("transforms", "joints", "scene"):
-            # Derived for viewers: stamped with the state or setpoint they come from.
+        if channel.topic in ("transforms", "joints", "scene", "log"):
+            # Derived for viewers: stamped with the state or setpoint they come from; a
+            # log line with its own time.
             t = {"transforms": lambda: msg["transforms"][0]["timestamp"],
                  "scene": lambda: msg["entities"][0]["timestamp"],
-                 "joints": lambda: msg["timestamp"]}[channel.topic]()
+                 "joints": lambda: msg["timestamp"],
+                 "log": lambda: msg["timestamp"]}[channel.topic]()
             assert t["sec"] * 10**9 + t["nsec"] == message.log_time, (channel.topic, t)
             stamp = message.publish_time
         else:
@@ -68,6 +70,7 @@ with open(sys.argv[1], "rb") as f:
 assert names["transforms"] == "foxglove.FrameTransforms", names
 assert names["joints"] == "microrobot.JointStates", names
 assert names["scene"] == "foxglove.SceneUpdate", names
+assert names["log"] == "foxglove.Log", names
 rec = json.loads(open(sys.argv[3]).read().strip().splitlines()[-1])
 print(f"python mcap reader: {n} messages on the wall clock (offset {offset} ns); "
       f"{rec['bytes']} bytes, {rec['bytes_per_s'] / 1e3:.1f} kB/s")
@@ -78,4 +81,5 @@ print("python mcap reader:", counts, "run cycles:", s["cycles"])
 assert counts.get("setpoint") + gaps["setpoint"] == s["cycles"]["planner"], (counts, gaps, s["cycles"])
 assert counts.get("torque") + gaps["torque"] == s["cycles"]["dynamics"], (counts, gaps, s["cycles"])
 assert counts.get("status", 0) > 0, counts
+assert counts.get("log", 0) >= 3, counts  # at least each service's start-up line
 PY

@@ -19,6 +19,7 @@
 
 pub mod closed_loop;
 pub mod export;
+pub mod logs;
 pub mod plot;
 pub mod record;
 pub mod recover;
@@ -416,8 +417,11 @@ impl Recording {
                     m.channel.message_encoding
                 );
             }
-            // The viewer channels are derived from the streams: nothing to read back.
-            if viewer::DERIVED_TOPICS.contains(&m.channel.topic.as_str()) {
+            // The viewer channels are derived from the streams, the log is text: nothing
+            // to read back.
+            if viewer::DERIVED_TOPICS.contains(&m.channel.topic.as_str())
+                || m.channel.topic == logs::TOPIC
+            {
                 continue;
             }
             let position = per_topic.entry(m.channel.topic.clone()).or_default();

@@ -222,6 +222,9 @@ fn nice_this_thread(inc: i32) {
     }
 }
 
+/// How often the writer reads the services' new log lines.
+const LOG_POLL_MS: u64 = 200;
+
 /// Longest span of message time in one chunk: a chunk is closed (and the file flushed)
 /// once its messages span this much, so a killed recorder loses at most this much.
 const CHUNK_SPAN_NS: u64 = 1_000_000_000;
@@ -237,6 +240,8 @@ struct Writer {
     /// The viewer channels: ids (`transforms`, `joints`, `scene`), MCAP sequence numbers, the
     /// run's robot (once its config is found), and when each was last derived.
     derived: Derived,
+    /// The services' log lines (`log`, `foxglove.Log`): channel id, sequence, the files.
+    logs: (u16, u32, super::logs::LogTail),
 }
 
 struct Derived {
@@ -370,6 +375,16 @@ impl Writer {
         for (i, (topic, name, schema)) in super::viewer::channels().into_iter().enumerate() {
             derived_channels[i] = add_channel(&mut mcap, path, (topic, name, &schema), &meta)?;
         }
+        let log_channel = add_channel(
+            &mut mcap,
+            path,
+            (
+                super::logs::TOPIC,
+                super::logs::SCHEMA_NAME,
+                &super::logs::schema(),
+            ),
+            &meta,
+        )?;
         let offset = clock_offset_ns();
         let clocks = BTreeMap::from([
             (
@@ -424,6 +439,7 @@ impl Writer {
                 last_setpoint_ns: None,
                 instance: args.instance.clone(),
             },
+            logs: (log_channel, 0, super::logs::LogTail::new(&args.instance)),
         })
     }
 
@@ -529,7 +545,36 @@ impl Writer {
         Ok(())
     }
 
+    /// Writes the services' log lines appended since the last call (`flush`: also a
+    /// last line without its newline).
+    fn write_logs(&mut self, flush: bool) -> Result<()> {
+        let offset = self.summary.realtime_minus_monotonic_ns;
+        let now = wall_ns(monotonic_ns(), offset);
+        let (channel, sequence, tail) = &mut self.logs;
+        let mut lines = Vec::new();
+        tail.poll(now, flush, |wall, msg| lines.push((wall, msg)));
+        for (wall, msg) in lines {
+            let data = serde_json::to_vec(&msg).context("JSON encoding")?;
+            *sequence = sequence.wrapping_add(1);
+            let mono = (wall as i128 - offset as i128).clamp(0, u64::MAX as i128) as u64;
+            put(
+                &mut self.mcap,
+                &self.summary.file,
+                (*channel, *sequence),
+                (wall, mono),
+                &data,
+            )?;
+            *self
+                .summary
+                .messages
+                .entry(super::logs::TOPIC.into())
+                .or_default() += 1;
+        }
+        Ok(())
+    }
+
     fn finish(mut self, instance: &str) -> Result<RecordSummary> {
+        self.write_logs(true)?;
         let data = if self.summary.config_attached {
             None
         } else {
@@ -611,10 +656,30 @@ pub fn main(args: RecordArgs) -> Result<()> {
             nice_this_thread(10);
             let mut w = writer;
             let mut first_error = None;
-            for r in rx {
-                if first_error.is_none()
-                    && let Err(e) = w.write(&r)
-                {
+            let mut logs_read_ns = 0;
+            loop {
+                let r = match rx.recv_timeout(std::time::Duration::from_millis(LOG_POLL_MS)) {
+                    Ok(r) => Some(r),
+                    Err(mpsc::RecvTimeoutError::Timeout) => None,
+                    Err(mpsc::RecvTimeoutError::Disconnected) => break,
+                };
+                if first_error.is_some() {
+                    // Drained, not written: the file ends at its last flushed chunk.
+                    continue;
+                }
+                let now = monotonic_ns();
+                let written = match r {
+                    Some(r) => w.write(&r),
+                    None => Ok(()),
+                }
+                .and_then(|()| {
+                    if now.saturating_sub(logs_read_ns) < LOG_POLL_MS * 1_000_000 {
+                        return Ok(());
+                    }
+                    logs_read_ns = now;
+                    w.write_logs(false)
+                });
+                if let Err(e) = written {
                     // Said at once (a full disk), and the recorder stops: what it
                     // wrote up to its last flushed chunk stays readable.
                     eprintln!("error: {e:#}; the recorder stops");
