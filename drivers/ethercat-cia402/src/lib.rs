@@ -1,0 +1,11 @@
+//! The transport-free core of an EtherCAT CiA 402 (IEC 61800-7-201) servo-drive driver.
+//!
+//! - [`cia402`]: the power drive state machine — statusword (0x6041) decoding,
+//!   controlword (0x6040) commands, and a per-axis [`cia402::Axis`] that walks a drive to
+//!   the wanted state one transition per cycle, resets faults only when asked and
+//!   reports transitions the standard does not allow.
+//!
+//! Nothing here touches the bus: the EtherCAT master uses these modules to fill and read
+//! the process data.
+
+pub mod cia402;
