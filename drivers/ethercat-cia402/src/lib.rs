@@ -4,8 +4,11 @@
 //!   controlword (0x6040) commands, and a per-axis [`cia402::Axis`] that walks a drive to
 //!   the wanted state one transition per cycle, resets faults only when asked and
 //!   reports transitions the standard does not allow.
+//! - [`scaling`]: per-axis conversions between drive units (encoder counts, per mille of
+//!   rated torque 0x6076) and joint SI units (rad or m, N·m or N), precomputed once.
 //!
 //! Nothing here touches the bus: the EtherCAT master uses these modules to fill and read
 //! the process data.
 
 pub mod cia402;
+pub mod scaling;
