@@ -6,9 +6,11 @@
 //!   reports transitions the standard does not allow.
 //! - [`scaling`]: per-axis conversions between drive units (encoder counts, per mille of
 //!   rated torque 0x6076) and joint SI units (rad or m, N·m or N), precomputed once.
+//! - [`drive_file`]: the TOML drive file (bus and axes), checked key by key.
 //!
 //! Nothing here touches the bus: the EtherCAT master uses these modules to fill and read
-//! the process data.
+//! the process data. The only I/O is reading the drive file.
 
 pub mod cia402;
+pub mod drive_file;
 pub mod scaling;
