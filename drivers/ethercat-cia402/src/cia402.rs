@@ -375,6 +375,9 @@ impl Axis {
     /// Asks for a fault reset: clears a latched illegal transition now and, if the drive
     /// is in Fault, sends one rising edge of controlword bit 7 (one cycle low, then
     /// high). Holding the request does not repeat the edge; call again for another.
+    /// A request made outside Fault lapses at the next step. Once the drive is out of
+    /// Fault (transition 15) the walk to the target resumes, so a reset with target
+    /// [`Target::Enabled`] re-enables the axis.
     pub fn reset(&mut self) {
         self.latched = None;
         self.reset = ResetPhase::Low;
