@@ -223,7 +223,7 @@ impl CommandError {
 pub use microrobot_runtime::config::MIN_LIMIT_SCALE;
 
 /// What the planner is doing, as a plain label ([`PlannerCore::mode`]); the state
-/// itself, with what each activity needs, is [`Activity`].
+/// itself, with what each activity needs, is the private `Activity` enum.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
     /// Holding a constant position.
