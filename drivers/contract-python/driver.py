@@ -557,7 +557,9 @@ class Driver:
         while not self.stop:
             now = monotonic_ns()
             wait_ns = max(0, min(next_step, next_status) - now)
-            if wait_ns > 0:
+            # iceoryx2 0.10.0's Python timed_wait takes a duration under 1 µs as "no
+            # timeout" and blocks until the next event: never pass one.
+            if wait_ns >= 1000:
                 try:
                     self.torque_listener.timed_wait(iox2.Duration.from_nanos(wait_ns))
                 except iox2.ListenerWaitError:

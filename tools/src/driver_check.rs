@@ -19,8 +19,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::LogLevel;
 use iceoryx2::service::ipc;
@@ -30,8 +29,8 @@ use microrobot_messages::{
     state_flags, torque_flags,
 };
 use microrobot_model::{JointVector, ModelData, Robot, mass_matrix, nonlinear_effects};
-use microrobot_runtime::PipelineConfig;
 use microrobot_runtime::exit_code;
+use microrobot_runtime::{Outbox, PipelineConfig};
 use serde::Serialize;
 
 use crate::supervisor::instance;
@@ -91,6 +90,24 @@ struct Seen {
     state: JointState,
 }
 
+/// How often new states and statuses were found, and how often with their events: a
+/// driver that notifies after each message wakes a listener about as often as the
+/// polls find new messages (an event can land one poll after its message).
+#[derive(Debug, Clone, Copy, Default)]
+struct Notified {
+    state_polls: u64,
+    state_events: u64,
+    status_polls: u64,
+    status_events: u64,
+}
+
+/// Consumes a listener's pending events; whether there were any.
+fn events(l: &Listener<ipc::Service>) -> bool {
+    let mut any = false;
+    let _ = l.try_wait(|_| any = true);
+    any
+}
+
 /// The scripted pipeline around the driver.
 struct Rig {
     robot: Robot,
@@ -99,11 +116,13 @@ struct Rig {
     period: Duration,
     lockstep: bool,
     monitor: StatusMonitor,
-    torque: Publisher<ipc::Service, TorqueCommand, ()>,
-    torque_notify: Notifier<ipc::Service>,
-    command: Publisher<ipc::Service, MotionCommand, ()>,
-    command_notify: Notifier<ipc::Service>,
+    torque: Outbox<TorqueCommand>,
+    command: Outbox<MotionCommand>,
     state_sub: Option<Subscriber<ipc::Service, JointState, ()>>,
+    /// The driver's `notify()` after its states and statuses.
+    state_events: Listener<ipc::Service>,
+    status_events: Listener<ipc::Service>,
+    notified: Notified,
     instance: String,
     /// Every torque sent, `sent[seq - 1]`.
     sent: Vec<Sent>,
@@ -125,23 +144,16 @@ impl Rig {
             &format!("microrobot-driver-check.{instance}.{}", std::process::id()),
         )?;
         let node = monitor.node();
-        let torque = open_publish_subscribe::<TorqueCommand>(node, &instance, ServiceKind::Torque)?
-            .publisher_builder()
-            .create()
-            .map_err(|e| anyhow::anyhow!("torque publisher: {e:?}"))?;
-        let torque_notify = open_event(node, &instance, ServiceKind::Torque)?
-            .notifier_builder()
-            .create()
-            .map_err(|e| anyhow::anyhow!("torque notifier: {e:?}"))?;
-        let command =
-            open_publish_subscribe::<MotionCommand>(node, &instance, ServiceKind::Command)?
-                .publisher_builder()
+        let torque = Outbox::open(node, &instance, microrobot_messages::topic::TORQUE)?;
+        let command = Outbox::open(node, &instance, microrobot_messages::topic::COMMAND)?;
+        let listen = |kind: ServiceKind| -> anyhow::Result<Listener<ipc::Service>> {
+            open_event(node, &instance, kind)?
+                .listener_builder()
                 .create()
-                .map_err(|e| anyhow::anyhow!("command publisher: {e:?}"))?;
-        let command_notify = open_event(node, &instance, ServiceKind::Command)?
-            .notifier_builder()
-            .create()
-            .map_err(|e| anyhow::anyhow!("command notifier: {e:?}"))?;
+                .map_err(|e| anyhow::anyhow!("{kind:?} listener: {e:?}"))
+        };
+        let (state_events, status_events) =
+            (listen(ServiceKind::State)?, listen(ServiceKind::Status)?);
         let data = ModelData::new(&robot);
         let dof = robot.dof();
         Ok(Self {
@@ -152,10 +164,11 @@ impl Rig {
             lockstep: cfg.lockstep,
             monitor,
             torque,
-            torque_notify,
             command,
-            command_notify,
             state_sub: None,
+            state_events,
+            status_events,
+            notified: Notified::default(),
             instance,
             sent: Vec::new(),
             states: Vec::new(),
@@ -183,6 +196,7 @@ impl Rig {
 
     /// Takes every waiting state and actuator status.
     fn pump(&mut self) -> anyhow::Result<()> {
+        let (states, statuses) = (self.states.len(), self.statuses.len());
         if let Some(sub) = &self.state_sub {
             loop {
                 match sub.receive() {
@@ -197,6 +211,11 @@ impl Rig {
                 self.statuses.push(st);
             }
         }
+        let n = &mut self.notified;
+        n.state_polls += u64::from(self.states.len() > states);
+        n.state_events += u64::from(events(&self.state_events));
+        n.status_polls += u64::from(self.statuses.len() > statuses);
+        n.status_events += u64::from(events(&self.status_events));
         Ok(())
     }
 
@@ -247,12 +266,7 @@ impl Rig {
             dof: self.dof as u32,
             flags: torque_flags::FEEDBACK,
         };
-        self.torque
-            .send_copy(msg)
-            .map_err(|e| anyhow::anyhow!("torque send: {e:?}"))?;
-        self.torque_notify
-            .notify()
-            .map_err(|e| anyhow::anyhow!("torque notify: {e:?}"))?;
+        anyhow::ensure!(self.torque.send(msg), "cannot send a torque command");
         self.sent.push(Sent {
             tick: self.tick,
             source_stamp_ns: now,
@@ -270,12 +284,7 @@ impl Rig {
             kind: CommandKind::Reset as u32,
             ..MotionCommand::default()
         };
-        self.command
-            .send_copy(msg)
-            .map_err(|e| anyhow::anyhow!("command send: {e:?}"))?;
-        self.command_notify
-            .notify()
-            .map_err(|e| anyhow::anyhow!("command notify: {e:?}"))?;
+        anyhow::ensure!(self.command.send(msg), "cannot send a reset command");
         Ok(())
     }
 
@@ -591,6 +600,7 @@ fn script(
     let t1 = monotonic_ns();
     out.extend(check_torque_phase(rig, from_state, t0, t1, unanswered));
     out.push(check_status(rig, from_status, cfg));
+    out.push(check_notify(&rig.notified));
 
     // 4. Torques paused past stale_ms, short of fault_ms (free-running only).
     if !rig.lockstep {
@@ -891,6 +901,34 @@ fn check_status(rig: &Rig, from: usize, cfg: &PipelineConfig) -> Clause {
             )
         } else {
             bad.join("; ")
+        },
+    }
+}
+
+/// Every state and status is followed by a `notify()` on its event service: the planner
+/// and dynamics sleep on the state event, the supervisor and monitors on the status one.
+fn check_notify(n: &Notified) -> Clause {
+    let mut bad = Vec::new();
+    for (what, polls, events) in [
+        ("state", n.state_polls, n.state_events),
+        ("status", n.status_polls, n.status_events),
+    ] {
+        if polls == 0 || 2 * events < polls {
+            bad.push(format!(
+                "{what}: {events} wake-ups for {polls} polls that found new {what}s"
+            ));
+        }
+    }
+    Clause {
+        name: "notify",
+        pass: bad.is_empty(),
+        seen: if bad.is_empty() {
+            format!(
+                "state events on {} of {} polls with new states, status events on {} of {}",
+                n.state_events, n.state_polls, n.status_events, n.status_polls
+            )
+        } else {
+            format!("{} (each must be followed by notify())", bad.join("; "))
         },
     }
 }
