@@ -5,7 +5,9 @@
 
 mod common;
 
-use common::{build, build_placed, jv, placed_spec, robot_spec, scale, state, to_placed};
+use common::{
+    build, build_placed, jv, placed_spec, projected_gradient, robot_spec, scale, state, to_placed,
+};
 use microrobot_model::{
     JointVector, ModelData, Robot, forward_dynamics, gravity_torque, jacobian, lagrange_euler,
     mass_matrix, rnea, tool_pose,
@@ -160,13 +162,91 @@ proptest! {
     }
 }
 
-proptest! {
-    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+// Inverse kinematics of a position target on a general chain, and what the
+// solver can promise.
+//
+// The solver minimises f(q) = ½|e|², e = t − p(q), by Levenberg-Marquardt: a
+// local method, which stops where the projected gradient Jᵀe vanishes. With
+// e = t − p(q) and ∇²f = JᵀJ − Σₖ eₖ ∇²pₖ, such a stationary point is a local
+// minimum whenever the residual is small against the curvature of the reachable
+// set p(q). That set folds over itself: for 2 joints it is a surface in R³, and
+// for more joints (with prismatic joints stopped at their limits) it can fold
+// too. A target on one sheet is also the foot of the perpendicular from another
+// sheet passing near it, at distance d = |e| > 0, and when that sheet curves away
+// from the target more slowly than a sphere of radius d (d·κ < 1), the foot is a
+// strict local minimum with f > 0. No local method escapes it, and restarts
+// only help if a seed lands in the solution's basin, which can be any fraction
+// of the joint space: on the chain of `two_joint_chain_has_a_spurious_local_minimum`
+// below it is 37 % (587 of a 40×40 grid of seeds converge), and all 9 fixed
+// attempts of `solve` (the zero seed and 8 restarts) fall in the other basin.
+// Over random chains of up to 7 joints, `solve` from the zero seed ends at such
+// a minimum in about 1 case in 2000 (96 of 200 000), mostly on 2-4 joints: the
+// old property "always converges" failed about one 32-case run in 70.
+//
+// What holds, and is tested:
+// * from a seed near a solution q* the local method converges: f(q*) = 0, so the
+//   residual term of ∇²f vanishes and ∇²f = JᵀJ; LM is then (damped)
+//   Gauss-Newton, locally quadratically convergent when J has full column rank
+//   (n ≤ 3), and for redundant chains (full row rank) to a nearby point of the
+//   solution manifold (local error bound: Yamashita-Fukushima, Fan-Yuan). The
+//   radius of that neighbourhood scales with σ_min(J) over the curvature of p
+//   and has no lower bound over all chains (near-singular configurations shrink
+//   it), so the test perturbs each joint by up to 0.01 rad (prismatic: the same
+//   fraction of its range over 2π): no failures in 200 000 random cases, where
+//   0.05 rad gave 3 (2-joint chains, spurious minima 4-45 µm from the target);
+// * from any seed `solve` returns either a converged solution or a stationary
+//   point of f over the box of joint limits (a KKT point: the gradient Jᵀe has
+//   no component along a joint that is free to move that way), inside the
+//   limits, no worse than the seed, with its true residual reported.
+//
+// The RNG seed is pinned so CI runs the same cases every time; PROPTEST_RNG_SEED
+// and PROPTEST_CASES override it to explore.
+fn ik_config(cases: u32) -> ProptestConfig {
+    ProptestConfig {
+        cases,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x1c_2007),
+        ..ProptestConfig::default()
+    }
+}
 
-    /// Inverse kinematics on placed chains: the tool position of a random
-    /// configuration is found again from the zero seed.
+proptest! {
+    #![proptest_config(ik_config(32))]
+
+    /// The local guarantee: from a seed within 0.01 rad (per joint, as a
+    /// fraction of a full turn of its range) of a solution, the damped
+    /// least-squares descent alone, without restarts, converges.
     #[test]
-    fn ik_position_round_trip_on_placed_chains(spec in placed_spec(7), u in prop::array::uniform8(0.0..1.0f64)) {
+    fn ik_position_converges_from_a_seed_near_a_solution(
+        spec in placed_spec(7),
+        u in prop::array::uniform8(0.0..1.0f64),
+        d in prop::array::uniform8(-1.0..1.0f64),
+    ) {
+        use microrobot_model::forward_kinematics;
+        use microrobot_model::ik::{IkOptions, IkTarget, solve_local};
+        let arm = build_placed(&spec);
+        let mut data = ModelData::new(&arm);
+        let (mut q_true, mut seed) = (JointVector::zeros(), JointVector::zeros());
+        for (i, j) in arm.joints().iter().enumerate() {
+            let (lo, hi) = (j.limits.min, j.limits.max);
+            q_true[i] = lo + (0.05 + 0.9 * u[i]) * (hi - lo);
+            seed[i] = q_true[i] + 0.01 * d[i] * (hi - lo) / std::f64::consts::TAU;
+        }
+        let target = forward_kinematics(&arm, &mut data, &q_true).translation.vector;
+        let sol = solve_local(&arm, &mut data, &IkTarget::Position(target), &seed, &IkOptions::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        prop_assert!(sol.converged && sol.position_error_m < 1e-9, "{sol:?}");
+        let reached = forward_kinematics(&arm, &mut data, &sol.q).translation.vector;
+        prop_assert!((reached - target).norm() < 1e-9);
+    }
+
+    /// From the zero seed, with restarts: a reachable target is either reached
+    /// or the solver stops at a (bound-constrained) local minimum of the
+    /// residual, and says so honestly.
+    #[test]
+    fn ik_position_from_zero_seed_converges_or_stops_at_a_local_minimum(
+        spec in placed_spec(7),
+        u in prop::array::uniform8(0.0..1.0f64),
+    ) {
         use microrobot_model::forward_kinematics;
         use microrobot_model::ik::{IkOptions, IkTarget, solve};
         let arm = build_placed(&spec);
@@ -176,12 +256,159 @@ proptest! {
             q_true[i] = j.limits.min + u[i] * (j.limits.max - j.limits.min);
         }
         let target = forward_kinematics(&arm, &mut data, &q_true).translation.vector;
-        let sol = solve(&arm, &mut data, &IkTarget::Position(target), &JointVector::zeros(), &IkOptions::default())
+        let zero = JointVector::zeros();
+        let seed_error = (forward_kinematics(&arm, &mut data, &zero).translation.vector - target).norm();
+        let sol = solve(&arm, &mut data, &IkTarget::Position(target), &zero, &IkOptions::default())
             .unwrap_or_else(|e| panic!("{e}"));
-        prop_assert!(sol.converged, "{sol:?}");
-        prop_assert!(sol.position_error_m < 1e-9);
+        for (i, j) in arm.joints().iter().enumerate() {
+            prop_assert!(j.limits.contains(sol.q[i]), "q[{i}] = {}", sol.q[i]);
+        }
         let reached = forward_kinematics(&arm, &mut data, &sol.q).translation.vector;
-        prop_assert!((reached - target).norm() < 1e-9);
+        prop_assert!(((reached - target).norm() - sol.position_error_m).abs() < 1e-12, "{sol:?}");
+        prop_assert!(sol.position_error_m <= seed_error, "{sol:?} seed error {seed_error}");
+        if sol.converged {
+            prop_assert!(sol.position_error_m < 1e-9);
+        } else {
+            // Observed at most 2e-7 over 200 000 random chains.
+            let g = projected_gradient(&arm, &mut data, &sol.q, &target);
+            prop_assert!(g < 1e-5, "not a stationary point: projected gradient {g:e}, {sol:?}");
+        }
+    }
+}
+
+/// The chain the old property "converges from the zero seed with 8 restarts"
+/// failed on: two revolute joints, a target at q* = (−2.9416, 1.9742). The
+/// residual has a strict local minimum 14.8 mm from the target at
+/// q ≈ (−2.6968, −3.0730), whose basin holds the zero seed and all 8 restart
+/// seeds; from near q* the solver converges.
+#[test]
+fn two_joint_chain_has_a_spurious_local_minimum() {
+    use common::{PlacedJointSpec, PlacedSpec};
+    use microrobot_model::forward_kinematics;
+    use microrobot_model::ik::{IkOptions, IkTarget, solve, solve_local};
+    let joint = |xyz: [f64; 3], rpy: [f64; 3], axis: [f64; 3]| PlacedJointSpec {
+        prismatic: false,
+        xyz,
+        rpy,
+        axis,
+        mass: 0.05,
+        com: [0.0; 3],
+        a: [0.0; 9],
+        rotor: 0.0,
+        viscous: 0.0,
+        coulomb: 0.0,
+    };
+    let arm = build_placed(&PlacedSpec {
+        gravity: [0.0; 3],
+        joints: vec![
+            joint(
+                [0.0; 3],
+                [0.0; 3],
+                [0.6089490376270793, 0.8088305877464584, -0.7338989703159395],
+            ),
+            joint(
+                [0.0, 0.29115444471644936, 0.11147126419415482],
+                [1.4192904001318005, -1.5667842791304094, -2.7239147119755853],
+                [0.6420885387370977, -0.3321331905110189, 0.565041285709335],
+            ),
+        ],
+        tool: ([0.0, 0.006904980205489654, -0.07364194443383183], [0.0; 3]),
+    });
+    let mut data = ModelData::new(&arm);
+    let pi = std::f64::consts::PI;
+    let mut q_true = JointVector::zeros();
+    q_true[0] = -pi + 0.031830967788938194 * 2.0 * pi;
+    q_true[1] = -pi + 0.8142075721025537 * 2.0 * pi;
+    let target = forward_kinematics(&arm, &mut data, &q_true)
+        .translation
+        .vector;
+    let error = |data: &mut ModelData, q: &JointVector| {
+        (forward_kinematics(&arm, data, q).translation.vector - target).norm()
+    };
+
+    let sol = solve(
+        &arm,
+        &mut data,
+        &IkTarget::Position(target),
+        &JointVector::zeros(),
+        &IkOptions::default(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert!(!sol.converged, "{sol:?}");
+    assert!(
+        (sol.q[0] + 2.6968).abs() < 1e-3 && (sol.q[1] + 3.0730).abs() < 1e-3,
+        "{sol:?}"
+    );
+    assert!((sol.position_error_m - 0.01477).abs() < 1e-4, "{sol:?}");
+    // A stationary point: the residual is normal to the reachable surface ...
+    let g = projected_gradient(&arm, &mut data, &sol.q, &target);
+    assert!(g < 1e-6, "projected gradient {g:e}");
+    // ... and a strict local minimum: every nearby configuration is farther.
+    for k in 0..16 {
+        let a = k as f64 * pi / 8.0;
+        let mut q = sol.q;
+        q[0] += 0.02 * a.cos();
+        q[1] += 0.02 * a.sin();
+        assert!(error(&mut data, &q) > sol.position_error_m, "direction {k}");
+    }
+    // Every restart seed lies in its basin ...
+    for restarts in 0..=8 {
+        let s = solve(
+            &arm,
+            &mut data,
+            &IkTarget::Position(target),
+            &JointVector::zeros(),
+            &IkOptions {
+                restarts,
+                ..IkOptions::default()
+            },
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            !s.converged && (s.q - sol.q).amax() < 1e-3,
+            "{restarts} restarts: {s:?}"
+        );
+    }
+    // ... though other seeds reach the target (37 % of a 40×40 grid) ...
+    let mut converged = 0;
+    for a in 0..40 {
+        for b in 0..40 {
+            let mut seed = JointVector::zeros();
+            seed[0] = -pi + 2.0 * pi * (a as f64 + 0.5) / 40.0;
+            seed[1] = -pi + 2.0 * pi * (b as f64 + 0.5) / 40.0;
+            let s = solve_local(
+                &arm,
+                &mut data,
+                &IkTarget::Position(target),
+                &seed,
+                &IkOptions::default(),
+            )
+            .unwrap_or_else(|e| panic!("{e}"));
+            converged += usize::from(s.converged);
+        }
+    }
+    assert!(
+        (400..1200).contains(&converged),
+        "{converged} of 1600 seeds converge"
+    );
+    // ... in particular every seed near the solution.
+    for k in 0..8 {
+        let a = k as f64 * pi / 4.0;
+        let mut seed = q_true;
+        seed[0] += 0.05 * a.cos();
+        seed[1] += 0.05 * a.sin();
+        let s = solve_local(
+            &arm,
+            &mut data,
+            &IkTarget::Position(target),
+            &seed,
+            &IkOptions::default(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            s.converged && (s.q - q_true).amax() < 1e-6,
+            "direction {k}: {s:?}"
+        );
     }
 }
 

@@ -1,12 +1,13 @@
 //! Inverse kinematics: round trips from FK of random configurations (full pose on
-//! the rank-5 seed arm and a random 7-joint chain, position only on the 2R and
-//! the spherical arm), honest non-convergence for unreachable targets, refusal
+//! the rank-5 seed arm, position only on the 2R and the spherical arm; on random
+//! chains of up to 7 joints, convergence near a solution and, from the zero
+//! seed, convergence or an honestly reported local minimum), honest non-convergence for unreachable targets, refusal
 //! of non-finite input.
 #![allow(clippy::needless_range_loop)] // index loops read like the matrix formulas
 
 mod common;
 
-use microrobot_model::ik::{IkError, IkOptions, IkTarget, solve};
+use microrobot_model::ik::{IkError, IkOptions, IkTarget, solve, solve_local};
 use microrobot_model::{JointVector, ModelData, Robot, forward_kinematics};
 use nalgebra::{Isometry3, Vector3};
 use proptest::prelude::*;
@@ -29,7 +30,12 @@ fn random_q(robot: &Robot, u: &[f64; 8]) -> JointVector {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+    // Pinned RNG seed: CI runs the same cases; PROPTEST_RNG_SEED overrides it.
+    #![proptest_config(ProptestConfig {
+        cases: 24,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x1c_2007),
+        ..ProptestConfig::default()
+    })]
 
     #[test]
     fn seed_arm_full_pose_round_trip(u in prop::array::uniform8(0.0..1.0f64), v in prop::array::uniform8(0.0..1.0f64)) {
@@ -51,16 +57,50 @@ proptest! {
         }
     }
 
+    /// A random chain of up to 7 joints from a seed near a solution: the local
+    /// method converges (see the comment above `ik_config` in general_chains.rs).
     #[test]
-    fn random_seven_joint_chain_position_round_trip(spec in common::robot_spec(7), u in prop::array::uniform8(0.0..1.0f64)) {
+    fn random_seven_joint_chain_position_converges_near_a_solution(
+        spec in common::robot_spec(7),
+        u in prop::array::uniform8(0.0..1.0f64),
+        d in prop::array::uniform8(-1.0..1.0f64),
+    ) {
+        let arm = common::build(&spec);
+        let mut data = ModelData::new(&arm);
+        let q_true = random_q(&arm, &u);
+        let mut seed = q_true;
+        for (i, j) in arm.joints().iter().enumerate() {
+            seed[i] += 0.01 * d[i] * (j.limits.max - j.limits.min) / std::f64::consts::TAU;
+        }
+        let target = forward_kinematics(&arm, &mut data, &q_true).translation.vector;
+        let sol = solve_local(&arm, &mut data, &IkTarget::Position(target), &seed, &IkOptions::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        prop_assert!(sol.converged && sol.position_error_m < 1e-9, "{sol:?}");
+    }
+
+    /// From the zero seed with restarts a reachable position is reached, or the
+    /// solver stops at a local minimum of the residual (chains of 2-4 joints
+    /// have them: a target on one sheet of the folded reachable surface near
+    /// another sheet) and reports it as not converged.
+    #[test]
+    fn random_seven_joint_chain_position_converges_or_stops_at_a_local_minimum(
+        spec in common::robot_spec(7),
+        u in prop::array::uniform8(0.0..1.0f64),
+    ) {
         let arm = common::build(&spec);
         let mut data = ModelData::new(&arm);
         let q_true = random_q(&arm, &u);
         let target = forward_kinematics(&arm, &mut data, &q_true).translation.vector;
         let sol = solve(&arm, &mut data, &IkTarget::Position(target), &JointVector::zeros(), &IkOptions::default())
             .unwrap_or_else(|e| panic!("{e}"));
-        prop_assert!(sol.converged, "{sol:?}");
-        prop_assert!(sol.position_error_m < 1e-9);
+        let reached = forward_kinematics(&arm, &mut data, &sol.q).translation.vector;
+        prop_assert!(((reached - target).norm() - sol.position_error_m).abs() < 1e-12, "{sol:?}");
+        if sol.converged {
+            prop_assert!(sol.position_error_m < 1e-9);
+        } else {
+            let g = common::projected_gradient(&arm, &mut data, &sol.q, &target);
+            prop_assert!(g < 1e-5, "not a stationary point: projected gradient {g:e}, {sol:?}");
+        }
     }
 }
 

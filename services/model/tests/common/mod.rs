@@ -360,3 +360,36 @@ pub fn to_placed(robot: &Robot) -> Robot {
     )
     .unwrap_or_else(|e| panic!("{e}"))
 }
+
+/// |P Jᵀe| / (|J|_F |e|): the cosine-like size of the projected gradient of
+/// ½|e|² at `q` (components pushing a joint out through a limit it rests on
+/// removed). Zero at a KKT point of the bound-constrained least squares.
+pub fn projected_gradient(
+    robot: &Robot,
+    data: &mut microrobot_model::ModelData,
+    q: &JointVector,
+    target: &nalgebra::Vector3<f64>,
+) -> f64 {
+    use microrobot_model::{forward_kinematics, jacobian};
+    let n = robot.dof();
+    let jac = jacobian(robot, data, q);
+    let e = target - forward_kinematics(robot, data, q).translation.vector;
+    let mut g = vec![0.0; n];
+    let mut jn = 0.0;
+    for c in 0..n {
+        for r in 0..3 {
+            g[c] += jac[(r, c)] * e[r];
+            jn += jac[(r, c)] * jac[(r, c)];
+        }
+        let l = &robot.joints()[c].limits;
+        if (q[c] >= l.max && g[c] > 0.0) || (q[c] <= l.min && g[c] < 0.0) {
+            g[c] = 0.0;
+        }
+    }
+    let gn = g.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if gn == 0.0 {
+        0.0
+    } else {
+        gn / (jn.sqrt() * e.norm())
+    }
+}
