@@ -867,8 +867,14 @@ impl PlannerCore {
         };
         let safe =
             s.flags & state_flags::SAFE_STATE != 0 || s.lifecycle == LifecycleState::Fault as u32;
-        match (self.activity, safe) {
-            (Activity::SafeHold { resume }, false) if resume || self.auto_resume => {
+        // Matched on the resume flag alone: the activity (with its motion, kilobytes)
+        // is not copied every tick.
+        let safe_hold = match self.activity {
+            Activity::SafeHold { resume } => Some(resume),
+            _ => None,
+        };
+        match (safe_hold, safe) {
+            (Some(resume), false) if resume || self.auto_resume => {
                 // The actuator follows commands again: bring the followed measured state
                 // to rest, jerk-limited (bumpless from where the arm is).
                 self.activity = match self.brake(false) {
@@ -882,8 +888,8 @@ impl PlannerCore {
                 };
                 return;
             }
-            (Activity::SafeHold { .. }, true) => return,
-            (_, true) => {
+            (Some(_), true) => return,
+            (None, true) => {
                 tracing::warn!(
                     "planner: the actuator reports its safe state; following the measured state"
                 );
@@ -981,12 +987,10 @@ impl PlannerCore {
         }
         match self.activity {
             Activity::Stopping(_) => flags |= setpoint_flags::STOPPING,
-            Activity::EStop { brake, .. } => {
-                flags |= setpoint_flags::ESTOP;
-                if brake.is_some() {
-                    flags |= setpoint_flags::STOPPING;
-                }
+            Activity::EStop { brake: Some(_), .. } => {
+                flags |= setpoint_flags::ESTOP | setpoint_flags::STOPPING;
             }
+            Activity::EStop { brake: None, .. } => flags |= setpoint_flags::ESTOP,
             _ => {}
         }
         if self.program.is_none()
