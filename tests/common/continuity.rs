@@ -212,9 +212,12 @@ pub struct TorqueStepReport {
 ///   (`SLOPE_LIMITED`), or a switch of the actuator's law (`COMMAND_STALE`,
 ///   `SAFE_STATE`; the blend back to the commands runs over `ramp_steps`);
 /// * a late command: a state that did not apply the command after its predecessor's
-///   (held or skipped `torque_seq`). That is a host stall as the streams see it: the
-///   free-running arm drifted open-loop under a held torque, and feedback then corrects
-///   a real error, within the limits but faster than healthy motion.
+///   (held or skipped `torque_seq`), or applied a command computed from another state
+///   than the one after its predecessor's command's (`state_seq` held or skipped: the
+///   dynamics was held up and saw the arm late, or saw several states at once). That is
+///   a host stall as the streams see it: the free-running arm drifted open-loop under a
+///   held torque, or feedback acted on an older state than usual, and then corrects a
+///   real error, within the limits but faster than healthy motion.
 pub fn torque_steps(
     states: &[JointState],
     torques: &[TorqueCommand],
@@ -252,6 +255,12 @@ pub fn torque_steps(
             if i > 0 && b.torque_seq != seg[i - 1].torque_seq.wrapping_add(1) {
                 last_late = Some(i);
             }
+            if i > 0
+                && let (Some(t), Some(p)) = (applied(b), applied(&seg[i - 1]))
+                && t.state_seq != p.state_seq.wrapping_add(1)
+            {
+                last_late = Some(i);
+            }
             // The first state of a process is published before any torque is applied.
             if i < 2 || !keep(&seg[i - 1]) || !keep(b) {
                 continue;
@@ -272,7 +281,7 @@ pub fn torque_steps(
                     out.after_late_command += 1;
                 } else {
                     out.violations.push(format!(
-                        "joint {}: applied torque {:.4} -> {:.4} N·m (step {d:.4} > healthy bound {lo:.4}, cap {hi:.4}) at state seq {} (lifecycle {}, flags {:#x}, torque_seq {} after {}; a flag in the last {ramp_steps} states: {after_flag}, a late command: {after_late}), command {:?}",
+                        "joint {}: applied torque {:.4} -> {:.4} N·m (step {d:.4} > healthy bound {lo:.4}, cap {hi:.4}) at state seq {} (lifecycle {}, flags {:#x}, torque_seq {} after {}; a flag in the last {ramp_steps} states: {after_flag}, a late command: {after_late}), command (seq, tau, flags, state_seq) {:?} after state_seq {:?}",
                         j + 1,
                         a.tau_applied[j],
                         b.tau_applied[j],
@@ -281,7 +290,8 @@ pub fn torque_steps(
                         b.flags,
                         b.torque_seq,
                         a.torque_seq,
-                        applied(b).map(|t| (t.header.seq, t.tau[j], t.flags)),
+                        applied(b).map(|t| (t.header.seq, t.tau[j], t.flags, t.state_seq)),
+                        applied(a).map(|t| t.state_seq),
                     ));
                 }
             }
