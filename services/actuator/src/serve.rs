@@ -359,10 +359,9 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
     type Sources = Sources;
 
     fn register<'p>(ports: &'p Ports, reactor: &mut Reactor<'p>) -> std::io::Result<Sources> {
-        let missing = || std::io::Error::other("an actuator inbox has no listener");
         Ok(Sources {
-            torque: reactor.add(ports.torques.listener().ok_or_else(missing)?)?,
-            command: reactor.add(ports.commands.listener().ok_or_else(missing)?)?,
+            torque: ports.torques.wake_on(reactor)?,
+            command: ports.commands.wake_on(reactor)?,
             timer: reactor.add(&ports.timer)?,
         })
     }

@@ -110,12 +110,8 @@ impl Stage for DynamicsStage {
     type Sources = Sources;
 
     fn register<'p>(ports: &'p Ports, reactor: &mut Reactor<'p>) -> std::io::Result<Sources> {
-        let listener = ports
-            .setpoints
-            .listener()
-            .ok_or_else(|| std::io::Error::other("the setpoint inbox has no listener"))?;
         Ok(Sources {
-            setpoint: reactor.add(listener)?,
+            setpoint: ports.setpoints.wake_on(reactor)?,
             timer: reactor.add(&ports.timer)?,
         })
     }

@@ -228,17 +228,9 @@ impl Stage for PlannerStage {
     type Sources = Sources;
 
     fn register<'p>(ports: &'p Ports, reactor: &mut Reactor<'p>) -> std::io::Result<Sources> {
-        let state = match ports.states.listener() {
-            Some(l) => Some(reactor.add(l)?),
-            None => None,
-        };
-        let command = ports
-            .commands
-            .listener()
-            .ok_or_else(|| std::io::Error::other("the command inbox has no listener"))?;
         Ok(Sources {
-            state,
-            command: reactor.add(command)?,
+            state: ports.states.register(reactor)?,
+            command: ports.commands.wake_on(reactor)?,
             timer: reactor.add(&ports.timer)?,
         })
     }

@@ -147,6 +147,25 @@ where
         self.listener.as_ref()
     }
 
+    /// Registers the inbox's listener with `reactor` (`None` for a polled inbox).
+    pub fn register<'p>(
+        &'p self,
+        reactor: &mut crate::Reactor<'p>,
+    ) -> std::io::Result<Option<crate::Source>> {
+        self.listener.as_ref().map(|l| reactor.add(l)).transpose()
+    }
+
+    /// [`Self::register`] for an inbox the stage wakes on: a polled one is an error
+    /// naming the stream.
+    pub fn wake_on<'p>(
+        &'p self,
+        reactor: &mut crate::Reactor<'p>,
+    ) -> std::io::Result<crate::Source> {
+        self.register(reactor)?.ok_or_else(|| {
+            std::io::Error::other(format!("{} is polled: nothing to wake on", self.name))
+        })
+    }
+
     /// The stream's service name.
     pub fn name(&self) -> &str {
         &self.name
