@@ -119,9 +119,13 @@ pub fn rfc3339_utc_ns(s: &str) -> Option<u64> {
     } else {
         frac.parse::<u64>().ok()? * 10u64.pow(9 - frac.len() as u32)
     };
-    let days = days_from_civil(y, mo, da);
-    let secs = u64::try_from(days).ok()? * 86_400 + h * 3600 + mi * 60 + se;
-    Some(secs * 1_000_000_000 + nanos)
+    // Checked: a line is input, and a year like 99999999 must not overflow (a panic in
+    // debug builds, a wrapped time in release).
+    let days = u64::try_from(days_from_civil(y, mo, da)).ok()?;
+    let secs = days
+        .checked_mul(86_400)?
+        .checked_add(h * 3600 + mi * 60 + se)?;
+    secs.checked_mul(1_000_000_000)?.checked_add(nanos)
 }
 
 /// Days since 1970-01-01 of a proleptic Gregorian date (H. Hinnant's `days_from_civil`).
@@ -278,6 +282,11 @@ mod tests {
             Some(1_709_251_199_000_000_000)
         );
         assert_eq!(rfc3339_utc_ns("2024-02-29 23:59:59Z"), None);
+        // Out of u64 ns range, or before 1970: no time (the line is kept whole instead).
+        assert_eq!(rfc3339_utc_ns("99999999-01-01T00:00:00Z"), None);
+        assert_eq!(rfc3339_utc_ns("1969-12-31T23:59:59Z"), None);
+        let (wall, m) = parse_line("planner", "99999999-01-01T00:00:00Z  INFO a: b", 5);
+        assert_eq!((wall, m["level"].as_u64()), (5, Some(0)));
     }
 
     #[test]
