@@ -10,8 +10,8 @@ use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::Refusal;
 use microrobot_runtime::{
-    BadConfig, Cycle, Inbox, Outbox, Reactor, Ready, Shutdown, Source, Stage, Subscription,
-    TimerFd, serve,
+    BadConfig, Cycle, Inbox, Outbox, Reactor, Ready, Received, Shutdown, Source, Stage,
+    Subscription, TimerFd, serve,
 };
 
 use crate::DynamicsCore;
@@ -74,11 +74,15 @@ struct DynamicsStage {
 impl DynamicsStage {
     /// Takes every queued measured state (the newest valid one is used).
     fn take_states(&mut self, states: &Inbox<JointState>) {
-        states.for_each(|r| {
-            let _ = self
-                .core
-                .accept_state_from(&r.msg, r.publisher, monotonic_ns(), || r.from_pipeline());
-        });
+        states.for_each(|r| self.take_state(&r));
+    }
+
+    /// Validates one measured state and keeps it if valid (refusals are counted by the
+    /// core).
+    fn take_state(&mut self, r: &Received<'_, JointState>) {
+        let _ = self
+            .core
+            .accept_state_from(&r.msg, r.publisher, monotonic_ns(), || r.from_pipeline());
     }
 
     /// Lockstep: setpoint `tick` needs measured state `tick − 1`. Its delivery to this
@@ -92,13 +96,7 @@ impl DynamicsStage {
             && !cycle.shutdown.is_requested()
         {
             match states.next() {
-                Some(r) => {
-                    let _ =
-                        self.core
-                            .accept_state_from(&r.msg, r.publisher, monotonic_ns(), || {
-                                r.from_pipeline()
-                            });
-                }
+                Some(r) => self.take_state(&r),
                 None => std::thread::yield_now(),
             }
         }
