@@ -146,7 +146,7 @@ fn saturated_cores_degrade_the_pipeline_visibly_but_never_make_it_jump() {
     });
     let peak = torque_peak(st, lim.dof);
     let bound = torque_step_bound(&healthy, &peak, RAMP_MS * 1e-3 / PERIOD_S);
-    // As in tests/faults.rs: the backend's activation is the one unblended change.
+    // As in tests/system/faults.rs: the backend's activation is the one unblended change.
     let slew = torque_slew(st, lim.dof, |x| {
         x.lifecycle != LifecycleState::Inactive as u32
     });

@@ -9,11 +9,9 @@
 //! 2. Clutch, NaN samples, a stalled device and a hand far outside the workspace, on
 //!    the seed arm itself: flagged, joint limits never exceeded, no jump.
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use microrobot_messages::{JointSetpoint, setpoint_flags};
 use microrobot_model::Robot;
 

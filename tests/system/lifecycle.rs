@@ -1,12 +1,10 @@
 //! The supervisor's lifecycle: Ctrl-C stops everything cleanly and leaves nothing
 //! behind, a run after `kill -9` starts cleanly, instances are separate and unique.
 
-mod common;
-
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
-use common::*;
+use crate::common::*;
 use microrobot_messages::ServiceRole;
 
 fn cfg_arg(path: &std::path::Path) -> String {

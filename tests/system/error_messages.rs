@@ -3,9 +3,7 @@
 //! `{cfg}` stands for the config file's path, `{dir}` for the test's directory, `{seed}`
 //! for the seed arm's robot file.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use microrobot_runtime::exit_code::{BAD_CONFIG, FAILURE, JOB_FAILED, USAGE};
 
 /// One case: a config (top-level keys and tables, or none), the command line, the exit

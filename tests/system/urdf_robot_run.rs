@@ -3,9 +3,7 @@
 //! lacks) runs its demo program to the end; a URDF robot without those limits is refused
 //! by `check` and `run` before anything starts, naming the overlay keys to add.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use microrobot_runtime::exit_code;
 
 fn panda_config(

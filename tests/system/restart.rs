@@ -2,12 +2,10 @@
 //! started again and the run ends cleanly; with `stop_all` the run stops with
 //! SERVICE_FAILED.
 
-mod common;
-
 use std::collections::BTreeSet;
 use std::time::{Duration, Instant};
 
-use common::*;
+use crate::common::*;
 use microrobot_messages::ServiceRole;
 
 fn dynamics_pid(statuses: &[microrobot_messages::ServiceStatus]) -> Option<i32> {

@@ -8,11 +8,9 @@
 //! dynamics (no torque is computed from them), and states injected while the actuator is
 //! frozen are refused by the planner and the dynamics.
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use iceoryx2::prelude::ZeroCopySend;
 use microrobot_messages::{
     CommandKind, Header, JointSetpoint, JointState, LifecycleState, RefusalReason, ServiceKind,

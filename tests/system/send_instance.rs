@@ -2,9 +2,7 @@
 //! instance runs (not the config of the current directory), and takes `--instance` and
 //! `--config` before or after the command.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 
 /// The seed arm's first two joints as a robot of its own.
 fn two_joint_robot(dir: &std::path::Path) -> std::path::PathBuf {

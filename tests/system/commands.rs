@@ -2,11 +2,9 @@
 //! `send` reports the planner's verdict on its own command (also with senders in
 //! parallel), `top` shows every service.
 
-mod common;
-
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 
 /// Table 4's limits of the seed arm (deg/s², deg/s³), per joint.
 const ACC_DEG_S2: [f64; 6] = [80.0, 40.0, 40.0, 80.0, 40.0, 80.0];

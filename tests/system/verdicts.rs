@@ -3,12 +3,10 @@
 //! run, and a safe state latched and left so, each end FAILED with the reason on stderr,
 //! a non-zero exit and `exit_ok: false`.
 
-mod common;
-
 use std::path::Path;
 use std::time::Duration;
 
-use common::*;
+use crate::common::*;
 use microrobot_messages::ServiceRole;
 use microrobot_runtime::exit_code;
 

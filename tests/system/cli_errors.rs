@@ -1,9 +1,7 @@
 //! Bad input at the command line is refused with a clear message and a distinct exit
 //! code, before anything starts.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use microrobot_runtime::exit_code;
 
 #[test]

@@ -4,13 +4,11 @@
 //! Bound stated here (free-running, 1 kHz, Table 4, feedback on): max tracking error
 //! < 5e-2 rad. Measured 2e-5 to 1e-4 rad in most runs with either clock; a host stall
 //! of several ms holds the torque that long, and one such run on the loaded VM reached
-//! 1.2e-2 rad. Open loop the error would grow to radians (see tests/pipeline.rs).
-
-mod common;
+//! 1.2e-2 rad. Open loop the error would grow to radians (see `pipeline.rs`).
 
 use std::time::{Duration, Instant};
 
-use common::*;
+use crate::common::*;
 use microrobot_messages::{ServiceRole, ServiceStatus, monotonic_ns};
 
 const STATE_CLOCK: &str = "[planner]\nclock = \"actuator_state\"";

@@ -13,11 +13,9 @@
 //! stream it is refused as an outsider's (the test is not a process the supervisor
 //! started) and latches the actuator's safe state.
 
-mod common;
-
 use std::time::{Duration, Instant};
 
-use common::*;
+use crate::common::*;
 use iceoryx2::prelude::*;
 use microrobot_messages::{
     CommandKind, Header, JointSetpoint, JointState, MotionCommand, ProfileKind, RefusalReason,
@@ -338,7 +336,7 @@ fn every_bad_input_class_is_refused_named_counted_and_moves_nothing() {
     });
     assert_eq!(latched.faults, 1, "the run's one fault is the outsider's");
     // The pipeline's own dynamics still drives the stream: a reset resumes it.
-    let mut reset = common::command(CommandKind::Reset);
+    let mut reset = crate::common::command(CommandKind::Reset);
     reset.seq = 1;
     reset.stamp_ns = monotonic_ns();
     cmd.send(reset);

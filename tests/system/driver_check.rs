@@ -3,9 +3,7 @@
 //! clause free-running and in lockstep; a driver that never reports ready, or one that
 //! is no driver at all, fails on the first clause, naming it.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 
 fn clauses(stdout: &str) -> Vec<(String, bool)> {
     stdout

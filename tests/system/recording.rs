@@ -4,12 +4,10 @@
 //! setpoint is reported); a recorder killed mid-run leaves a file that `export` reads up
 //! to its last complete chunk and `recover` finishes.
 
-mod common;
-
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::Path;
 
-use common::*;
+use crate::common::*;
 use serde_json::Value;
 
 /// Field names of `v`, nested ones as `outer.inner`.

@@ -9,11 +9,9 @@
 //! - links 10 % heavier, feed-forward only: more than 10× the feedback error (the
 //!   plant drifts open-loop under a held torque; measured ~6 rad).
 
-mod common;
-
 use std::path::PathBuf;
 
-use common::*;
+use crate::common::*;
 
 fn table4_lockstep(test: &str, extra_args: &[&str]) -> (serde_json::Value, String) {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -1,11 +1,9 @@
 //! Looking at a running arm like a ros2 system: `list`, `echo`, `hz`, `logs`; one
 //! duration syntax; printing commands end quietly when their reader goes away.
 
-mod common;
-
 use std::process::Command;
 
-use common::*;
+use crate::common::*;
 use microrobot_runtime::exit_code;
 
 fn s(p: &std::path::Path) -> String {

@@ -5,12 +5,10 @@
 //! A reset during the brake, alone or in a flood of random commands, never steps the
 //! setpoint stream.
 
-mod common;
-
 use std::time::Duration;
 
-use common::continuity::{Limits, setpoint_jumps};
-use common::*;
+use crate::common::continuity::{Limits, setpoint_jumps};
+use crate::common::*;
 use microrobot_messages::{CommandKind, LifecycleState, ServiceRole, monotonic_ns, setpoint_flags};
 use microrobot_trajectory::{JointVector, KinematicLimits, MotionState as Start, stop_trajectory};
 

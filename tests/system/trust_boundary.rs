@@ -4,12 +4,10 @@
 //! The one exception is iceoryx2's own 16-byte global management segment
 //! (`*.global_mgmt`), world-writable by iceoryx2's design and carrying no pipeline data.
 
-mod common;
-
 use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
 use std::path::Path;
 
-use common::*;
+use crate::common::*;
 
 fn walk(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
     let Ok(rd) = std::fs::read_dir(dir) else {

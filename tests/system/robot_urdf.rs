@@ -2,9 +2,7 @@
 //! loads as the same robot (`eval model` answers the same on both, to 1e-9 relative);
 //! bad input is a clear error with the documented exit code.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use microrobot_runtime::exit_code;
 use std::io::Write as _;
 use std::process::{Command, Stdio};

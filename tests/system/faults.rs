@@ -7,15 +7,13 @@
 //! Stamps are all CLOCK_MONOTONIC (the test's and the services'), so "after the last
 //! torque" is a comparison of stamps, not a timing claim. Guards are generous.
 
-mod common;
-
 use std::time::Duration;
 
-use common::continuity::{
+use crate::common::continuity::{
     Limits, segments, setpoint_jumps, state_at, torque_peak, torque_slew, torque_step_bound,
     torque_steps,
 };
-use common::*;
+use crate::common::*;
 use microrobot_messages::{
     LifecycleState, ServiceRole, monotonic_ns, setpoint_flags, state_flags, torque_flags,
 };

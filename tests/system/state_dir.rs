@@ -3,13 +3,11 @@
 //! owner-only files, and refuses one that is a symlink or belongs to someone else,
 //! naming the path and the owner, without touching anything the symlinks in it point at.
 
-mod common;
-
 use std::os::unix::fs::{MetadataExt, PermissionsExt, symlink};
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-use common::*;
+use crate::common::*;
 
 /// `microrobot run` of a short holding pipeline with `XDG_RUNTIME_DIR=xdg` (and no
 /// `MICROROBOT_STATE_DIR`), so the state directory is `<xdg>/microrobot`.
