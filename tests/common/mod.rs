@@ -25,6 +25,11 @@ pub fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_microrobot")
 }
 
+/// The simulated arm's service binary (`microrobot-actuator`) of the same build.
+pub fn actuator_bin() -> &'static str {
+    env!("CARGO_BIN_EXE_microrobot-actuator")
+}
+
 /// The repository root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

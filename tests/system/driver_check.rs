@@ -29,7 +29,7 @@ fn sim_arm(config: &std::path::Path, lockstep: bool) -> Finished {
     if lockstep {
         args.push("--lockstep");
     }
-    args.extend(["--", bin(), "service", "actuator", "--config", "{config}"]);
+    args.extend(["--", actuator_bin(), "--config", "{config}"]);
     run(&args, 120.0)
 }
 

@@ -25,6 +25,7 @@ mod recording;
 mod restart;
 mod robot_urdf;
 mod send_instance;
+mod service_binaries;
 mod state_dir;
 mod study;
 mod takeover;

@@ -14,7 +14,6 @@ pub mod recording;
 pub mod robot_cmd;
 pub mod run;
 pub mod send;
-pub mod service;
 pub mod soak;
 pub mod study;
 pub mod supervisor;

@@ -2,7 +2,8 @@
 //!
 //! One binary for everything a user does: run and supervise the pipeline, command and
 //! watch a running one, and evaluate the models offline. The pipeline's services are
-//! separate processes; the supervisor starts them as `microrobot service <role>`.
+//! separate processes: the supervisor starts the slim service binaries of the same build
+//! (`microrobot-planner`, `microrobot-dynamics`, `microrobot-actuator`) found beside this one.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -11,13 +12,13 @@ use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, recover, replay};
 use microrobot_cli::{
     check, driver_check, eval_model, eval_trajectory, inspect, probe_chain, robot_cmd, run, send,
-    service, soak, study, teleop_report, teleop_source, top,
+    soak, study, teleop_report, teleop_source, top,
 };
 
 #[derive(Parser)]
 #[command(
     name = "microrobot",
-    version,
+    version = concat!(env!("CARGO_PKG_VERSION"), " (build ", env!("MICROROBOT_BUILD_ID"), ")"),
     about = "Real-time motion stack for a 6-DOF surgical arm"
 )]
 struct Cli {
@@ -76,9 +77,6 @@ enum Command {
     /// Convert a robot description (`robot urdf`: any robot file as URDF and its overlay).
     #[command(subcommand)]
     Robot(robot_cmd::RobotCommand),
-    /// Run one pipeline service in this process (used by `microrobot run`).
-    #[command(hide = true)]
-    Service(service::ServiceArgs),
     /// Print a shell completion script (e.g. `microrobot completions bash >
     /// ~/.local/share/bash-completion/completions/microrobot`).
     Completions {
@@ -144,7 +142,7 @@ fn main() -> ExitCode {
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     if !matches!(
         cli.command,
-        Command::Run(_) | Command::Soak(_) | Command::Service(_) | Command::Record(_)
+        Command::Run(_) | Command::Soak(_) | Command::Record(_)
     ) {
         // A closed stdout (`| head`) ends a printing command quietly, as it does `cat`,
         // instead of a panic in println!. The supervisor and the services keep Rust's
@@ -172,7 +170,6 @@ fn main() -> ExitCode {
         Command::Plot(args) => plot::main(args),
         Command::Replay(args) => replay::main(args),
         Command::Recover(args) => recover::main(args),
-        Command::Service(args) => return service::main(args),
         Command::Eval(EvalCommand::Model { robot, method }) => eval_model::run(&robot, method),
         Command::Eval(EvalCommand::Trajectory) => eval_trajectory::run(),
         Command::Robot(cmd) => robot_cmd::main(cmd),

@@ -24,6 +24,7 @@ use microrobot_model::Robot;
 use microrobot_runtime::config::FailurePolicy;
 use microrobot_runtime::{PipelineConfig, exit_code};
 
+use crate::supervisor::binaries::ServiceBinaries;
 use crate::supervisor::instance::{self, InstanceInUse};
 use crate::supervisor::monitor::{ROLES, StatusMonitor, slot};
 use crate::supervisor::process::{Launch, Service, describe, log_tail};
@@ -513,31 +514,30 @@ pub fn driver_argv(
         .collect()
 }
 
-/// The launch of `role`: `microrobot service <role> --config <resolved>` or the
-/// configured external actuator command ([`driver_argv`]; [`service_env`] either way).
+/// The launch of `role`: its service binary (`microrobot-<role> --config <resolved>`)
+/// or the configured external actuator command ([`driver_argv`]; [`service_env`]
+/// either way).
 fn launch_for(
     role: ServiceRole,
+    binaries: &ServiceBinaries,
     cfg: &PipelineConfig,
     resolved: &Path,
     run_dir: &Path,
-) -> anyhow::Result<Launch> {
-    let exe = std::env::current_exe().context("cannot find the microrobot executable")?;
+) -> Launch {
     let argv = match (&cfg.actuator.command, role) {
         (Some(cmd), ServiceRole::Actuator) => driver_argv(cmd, cfg, resolved, run_dir),
         _ => vec![
-            exe.display().to_string(),
-            "service".to_string(),
-            role.name().to_string(),
+            binaries.path(role).display().to_string(),
             "--config".to_string(),
             resolved.display().to_string(),
         ],
     };
-    Ok(Launch {
+    Launch {
         role: role_name(role),
         argv,
         env: service_env(cfg, resolved),
         log: run_dir.join(format!("{}.log", role.name())),
-    })
+    }
 }
 
 /// Progress output: an indicatif line on a terminal, plain lines every few seconds otherwise.
@@ -755,6 +755,10 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
         });
     }
 
+    // The service binaries of this build (built first under `cargo run`), before anything
+    // starts.
+    let binaries = ServiceBinaries::locate().map_err(fail(exit_code::FAILURE))?;
+
     // One pipeline per instance: the lock refuses a second supervisor, the node scan a
     // pipeline whose supervisor is gone but whose services still run.
     let _lock = instance::lock_instance(&instance_name).map_err(|e| {
@@ -841,8 +845,7 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
 
     // Start in order, each after the previous one is ready.
     for role in ROLES {
-        let launch =
-            launch_for(role, &cfg, &resolved, &run_dir).map_err(fail(exit_code::FAILURE))?;
+        let launch = launch_for(role, &binaries, &cfg, &resolved, &run_dir);
         monitor.reset(role, monotonic_ns());
         match Service::spawn(launch) {
             Ok(s) => pipe.services[slot(role)] = Some(s),

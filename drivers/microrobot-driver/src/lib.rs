@@ -2,7 +2,7 @@
 //!
 //! A driver is an [`ActuatorBackend`] — `read(now) -> Measured`, `write(now, period, τ)`
 //! and optional lifecycle hooks — handed to [`main`]. The actuator framework behind it
-//! (the same code as the simulated arm's `microrobot service actuator`) does the rest:
+//! (the same code as the simulated arm's `microrobot-actuator`) does the rest:
 //! the bus ports, the lifecycle, the stale hold and the latched safe state with its
 //! reset, the one-publisher rule, stall handling, the state stream with its header
 //! bookkeeping (one state per cycle free-running, one per torque command in lockstep),

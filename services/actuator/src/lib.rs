@@ -552,7 +552,7 @@ pub fn load_robot(cfg: &PipelineConfig) -> anyhow::Result<Robot> {
     Robot::from_file(&cfg.robot).map_err(|e| BadConfig(format!("robot file: {e}")).into())
 }
 
-/// The actuator service with the simulated arm (`microrobot service actuator`): [`serve`]
+/// The actuator service with the simulated arm (`microrobot-actuator`): [`serve`]
 /// with a [`SimArm`] started where [`Setup::start`] says the arm is.
 pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     serve(cfg, shutdown, |setup: &Setup| {

@@ -16,7 +16,7 @@ use microrobot_runtime::{
 
 use crate::DynamicsCore;
 
-/// The dynamics service (`microrobot service dynamics`).
+/// The dynamics service (`microrobot-dynamics`).
 pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let robot = microrobot_model::Robot::from_file(&cfg.robot)
         .map_err(|e| BadConfig(format!("robot file: {e}")))?;

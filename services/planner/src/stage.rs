@@ -18,7 +18,7 @@ use microrobot_runtime::{
 use crate::program::ProgramRunner;
 use crate::{CommandError, Mode, PlannerCore, load_robot};
 
-/// The planner service (`microrobot service planner`).
+/// The planner service (`microrobot-planner`).
 pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let robot = load_robot(cfg)?;
     let program = match &cfg.program {

@@ -85,6 +85,28 @@ pub fn enter_cycle(cfg: &PipelineConfig) {
     );
 }
 
+/// The `main` of a service binary (`microrobot-planner`, `microrobot-dynamics`,
+/// `microrobot-actuator`): `--config FILE` runs the service ([`service_main`]);
+/// `--build-id` prints `build_id`, the identity of the build this binary came from,
+/// which the supervisor compares with its own before it starts anything, so a binary
+/// left over from another build never runs in a pipeline. Anything else is a usage
+/// error ([`exit_code::USAGE`]).
+pub fn service_binary_main(role: ServiceRole, build_id: &str, service: ServiceFn) -> ExitCode {
+    let args: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
+    let program = format!("microrobot-{}", role.name());
+    match args.as_slice() {
+        [flag] if flag == "--build-id" => {
+            println!("{build_id}");
+            ExitCode::SUCCESS
+        }
+        [flag, path] if flag == "--config" => service_main(role, Path::new(path), service),
+        _ => {
+            eprintln!("usage: {program} --config FILE\n       {program} --build-id");
+            ExitCode::from(exit_code::USAGE)
+        }
+    }
+}
+
 /// Installs tracing (`RUST_LOG`, default `info`, to stderr), makes `ctrlc` the one owner
 /// of SIGINT/SIGTERM, asks for SIGTERM if the parent (the supervisor) dies, loads the
 /// config, applies the real-time settings that precede set-up (PM QoS, timer slack,
