@@ -533,7 +533,10 @@ mod tests {
         ] {
             assert_eq!(command.controlword().command(), command);
         }
-        assert_eq!(Command::DisableOperation.controlword().command(), Command::SwitchOn);
+        assert_eq!(
+            Command::DisableOperation.controlword().command(),
+            Command::SwitchOn
+        );
     }
 
     use super::DriveState::*;

@@ -105,7 +105,11 @@ impl DriveConfig {
     /// driver's example drive file (20-bit encoder; gear 100 and 1.27 N·m rated on axes
     /// 1-3, gear 50 and 0.64 N·m on axes 4-6).
     pub fn seed_axis(axis: usize) -> DriveConfig {
-        let (gear_ratio, rated_torque_nm) = if axis < 3 { (100.0, 1.27) } else { (50.0, 0.64) };
+        let (gear_ratio, rated_torque_nm) = if axis < 3 {
+            (100.0, 1.27)
+        } else {
+            (50.0, 0.64)
+        };
         DriveConfig {
             name: format!("MR-SERVO-J{}", axis + 1),
             identity: Identity {
@@ -201,7 +205,9 @@ impl ChainConfig {
                     ),
                 ));
             }
-            PlantKind::Inertia { inertia_kg_m2 } if !(inertia_kg_m2 > 0.0 && inertia_kg_m2.is_finite()) => {
+            PlantKind::Inertia { inertia_kg_m2 }
+                if !(inertia_kg_m2 > 0.0 && inertia_kg_m2.is_finite()) =>
+            {
                 return Err(err(
                     "inertia_kg_m2".into(),
                     format!("must be positive, got {inertia_kg_m2}"),
@@ -324,9 +330,7 @@ impl ChainFile {
                             .max_torque_per_mille
                             .unwrap_or(s.max_torque_per_mille),
                         csp_kp_nm_per_rad: d.csp_kp_nm_per_rad.unwrap_or(s.csp_kp_nm_per_rad),
-                        csp_kd_nm_s_per_rad: d
-                            .csp_kd_nm_s_per_rad
-                            .unwrap_or(s.csp_kd_nm_s_per_rad),
+                        csp_kd_nm_s_per_rad: d.csp_kd_nm_s_per_rad.unwrap_or(s.csp_kd_nm_s_per_rad),
                     }
                 })
                 .collect(),

@@ -83,14 +83,28 @@ impl Drive {
         od.insert(0x6064, 0, &0i32.to_le_bytes(), Ro, M::Tx);
         od.insert(0x606C, 0, &0i32.to_le_bytes(), Ro, M::Tx);
         od.insert(0x6071, 0, &0i16.to_le_bytes(), Rw, M::Rx);
-        od.insert(0x6072, 0, &cfg.max_torque_per_mille.to_le_bytes(), Rw, M::Rx);
-        let rated_mnm = (cfg.rated_torque_nm * 1000.0).round().clamp(0.0, u32::MAX as f64) as u32;
+        od.insert(
+            0x6072,
+            0,
+            &cfg.max_torque_per_mille.to_le_bytes(),
+            Rw,
+            M::Rx,
+        );
+        let rated_mnm = (cfg.rated_torque_nm * 1000.0)
+            .round()
+            .clamp(0.0, u32::MAX as f64) as u32;
         // 0x6076 rated torque, in mN·m (CiA 402 6.8.1).
         od.insert(0x6076, 0, &rated_mnm.to_le_bytes(), Ro, M::No);
         od.insert(0x6077, 0, &0i16.to_le_bytes(), Ro, M::Tx);
         od.insert(0x607A, 0, &0i32.to_le_bytes(), Rw, M::Rx);
         // 0x6502 supported drive modes: bit 7 CSP, bit 9 CST.
-        od.insert(0x6502, 0, &((1u32 << 7) | (1 << 9)).to_le_bytes(), Ro, M::No);
+        od.insert(
+            0x6502,
+            0,
+            &((1u32 << 7) | (1 << 9)).to_le_bytes(),
+            Ro,
+            M::No,
+        );
         let mut d = Drive {
             cfg: cfg.clone(),
             od,
@@ -147,10 +161,11 @@ impl Drive {
         if self.state == DriveState::FaultReactionActive {
             self.state = DriveState::Fault;
         }
+        let before = self.state;
         if outputs_valid {
             let cw = self.od.u16(0x6040, 0);
-            let rising_reset = Controlword(cw).fault_reset()
-                && !Controlword(self.last_controlword).fault_reset();
+            let rising_reset =
+                Controlword(cw).fault_reset() && !Controlword(self.last_controlword).fault_reset();
             self.last_controlword = cw;
             self.state = next_state(self.state, Controlword(cw).command(), rising_reset);
             if self.state == DriveState::SwitchOnDisabled && rising_reset {
@@ -161,17 +176,20 @@ impl Drive {
         let (torque, braked) = match self.state {
             DriveState::OperationEnabled => {
                 let asked = match self.mode() {
-                    MODE_CST => self.per_mille_to_joint_nm(f64::from(self.od.u16(0x6071, 0) as i16)),
+                    MODE_CST => {
+                        self.per_mille_to_joint_nm(f64::from(self.od.u16(0x6071, 0) as i16))
+                    }
                     MODE_CSP => {
                         let target = self.counts_to_joint_rad(self.od.u32(0x607A, 0) as i32);
-                        self.cfg.csp_kp_nm_per_rad * (target - q) - self.cfg.csp_kd_nm_s_per_rad * qd
+                        self.cfg.csp_kp_nm_per_rad * (target - q)
+                            - self.cfg.csp_kd_nm_s_per_rad * qd
                     }
                     _ => 0.0,
                 };
                 (asked, false)
             }
             DriveState::QuickStopActive => {
-                if qd.abs() < QUICK_STOP_DONE_RAD_S {
+                if before == DriveState::QuickStopActive && qd.abs() < QUICK_STOP_DONE_RAD_S {
                     // Quick stop option code 2: stop, then to Switch on disabled.
                     self.state = DriveState::SwitchOnDisabled;
                     (0.0, true)
@@ -270,7 +288,9 @@ mod tests {
         d.od.set(0x6040, 0, &cw.to_le_bytes());
         d.control(true, 0.0, 0.0);
         d.sense(0.0, 0.0);
-        Statusword(d.od.u16(0x6041, 0)).state().expect("defined statusword")
+        Statusword(d.od.u16(0x6041, 0))
+            .state()
+            .expect("defined statusword")
     }
 
     #[test]
@@ -284,11 +304,22 @@ mod tests {
         // At standstill the quick stop completes to Switch on disabled.
         assert_eq!(run(&mut d, 0x0002), DriveState::SwitchOnDisabled);
         d.fault(0x2310);
-        assert_eq!(run(&mut d, 0x0080), DriveState::Fault, "bit 7 high before any edge");
+        assert_eq!(run(&mut d, 0x0000), DriveState::Fault);
         assert_eq!(d.od.u16(0x603F, 0), 0x2310);
+        assert_eq!(
+            run(&mut d, 0x0080),
+            DriveState::SwitchOnDisabled,
+            "rising edge"
+        );
+        assert_eq!(d.od.u16(0x603F, 0), 0);
+        d.fault(0x7500);
+        assert_eq!(
+            run(&mut d, 0x0080),
+            DriveState::Fault,
+            "bit 7 held high: no edge"
+        );
         assert_eq!(run(&mut d, 0x0000), DriveState::Fault);
         assert_eq!(run(&mut d, 0x0080), DriveState::SwitchOnDisabled);
-        assert_eq!(d.od.u16(0x603F, 0), 0);
     }
 
     #[test]
@@ -307,6 +338,9 @@ mod tests {
         assert_eq!(d.od.u16(0x6077, 0) as i16, 500);
         d.od.set(0x6071, 0, &5000i16.to_le_bytes());
         let (tau, _) = d.control(true, 0.0, 0.0);
-        assert!((tau - 381.0).abs() < 1e-9, "clipped at 0x6072 = 3000 ‰: {tau}");
+        assert!(
+            (tau - 381.0).abs() < 1e-9,
+            "clipped at 0x6072 = 3000 ‰: {tau}"
+        );
     }
 }

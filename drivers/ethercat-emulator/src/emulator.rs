@@ -103,7 +103,9 @@ pub struct Emulator {
 
 impl std::fmt::Debug for Emulator {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Emulator").field("drives", &self.len()).finish()
+        f.debug_struct("Emulator")
+            .field("drives", &self.len())
+            .finish()
     }
 }
 
@@ -144,7 +146,10 @@ impl Emulator {
     }
 
     /// A chain on a plant of your own (one axis per drive).
-    pub fn with_plant(config: &ChainConfig, plant: Box<dyn Plant>) -> Result<Emulator, ConfigError> {
+    pub fn with_plant(
+        config: &ChainConfig,
+        plant: Box<dyn Plant>,
+    ) -> Result<Emulator, ConfigError> {
         config.validate("<chain config>")?;
         if plant.axes() != config.drives.len() {
             return Err(ConfigError {
@@ -172,7 +177,8 @@ impl Emulator {
         chain.update_ports();
         // Inputs valid from power on (position of the plant at rest).
         for (i, s) in chain.subs.iter_mut().enumerate() {
-            s.drive.sense(chain.plant.position(i), chain.plant.velocity(i));
+            s.drive
+                .sense(chain.plant.position(i), chain.plant.velocity(i));
         }
         Ok(Emulator {
             chain: Arc::new(Mutex::new(chain)),
@@ -213,7 +219,9 @@ impl Emulator {
             }
         };
         match fault {
-            Fault::DriveFault { drive, error_code } => c.subs[check(drive)?].drive.fault(error_code),
+            Fault::DriveFault { drive, error_code } => {
+                c.subs[check(drive)?].drive.fault(error_code)
+            }
             Fault::DropOutOfOp {
                 drive,
                 al_status_code,
@@ -315,7 +323,9 @@ impl Chain {
 
     /// How many SubDevices a frame reaches.
     fn reached(&self) -> usize {
-        self.link_down_at.unwrap_or(self.subs.len()).min(self.subs.len())
+        self.link_down_at
+            .unwrap_or(self.subs.len())
+            .min(self.subs.len())
     }
 
     fn update_ports(&mut self) {
@@ -468,7 +478,8 @@ impl Chain {
         }
         self.plant.step(&torque, &braked, dt);
         for (i, s) in self.subs.iter_mut().enumerate() {
-            s.drive.sense(self.plant.position(i), self.plant.velocity(i));
+            s.drive
+                .sense(self.plant.position(i), self.plant.velocity(i));
             if matches!(s.al_state(), al::SAFE_OP | al::OP) {
                 s.objects_to_inputs();
             }
@@ -555,7 +566,9 @@ mod tests {
     #[test]
     fn broadcast_read_counts_every_device_and_malformed_frames_are_counted() {
         let e = Emulator::new(&ChainConfig::inertia_chain(3)).expect("chain");
-        let r = e.handle_frame(&frame(cmd::BRD, 0, 0, &[0, 0])).expect("answer");
+        let r = e
+            .handle_frame(&frame(cmd::BRD, 0, 0, &[0, 0]))
+            .expect("answer");
         assert_eq!(wkc(&r.frame), 3);
         assert_eq!(r.frame[6], 0x12, "locally administered bit set");
         assert_eq!(r.frame[16 + 10], 0x11, "ESC type");
@@ -573,7 +586,12 @@ mod tests {
     fn auto_increment_write_then_configured_read() {
         let e = Emulator::new(&ChainConfig::inertia_chain(3)).expect("chain");
         let r = e
-            .handle_frame(&frame(cmd::APWR, 0u16.wrapping_sub(2), 0x0010, &0x1002u16.to_le_bytes()))
+            .handle_frame(&frame(
+                cmd::APWR,
+                0u16.wrapping_sub(2),
+                0x0010,
+                &0x1002u16.to_le_bytes(),
+            ))
             .expect("answer");
         assert_eq!(wkc(&r.frame), 1);
         let r = e
@@ -582,7 +600,9 @@ mod tests {
         assert_eq!(wkc(&r.frame), 1);
         assert_eq!(e.drive(2).map(|d| d.station_address), Some(0x1002));
         // A read-only register keeps its value, the write still counts.
-        let r = e.handle_frame(&frame(cmd::FPWR, 0x1002, 0x0130, &[8, 0])).expect("answer");
+        let r = e
+            .handle_frame(&frame(cmd::FPWR, 0x1002, 0x0130, &[8, 0]))
+            .expect("answer");
         assert_eq!(wkc(&r.frame), 1);
         assert_eq!(e.drive(2).map(|d| d.al_state), Some(al::INIT));
     }
@@ -590,16 +610,27 @@ mod tests {
     #[test]
     fn refused_state_change_sets_the_error_and_code() {
         let e = Emulator::new(&ChainConfig::inertia_chain(1)).expect("chain");
-        e.handle_frame(&frame(cmd::APWR, 0, 0x0120, &[al::OP, 0])).expect("answer");
+        e.handle_frame(&frame(cmd::APWR, 0, 0x0120, &[al::OP, 0]))
+            .expect("answer");
         let d = e.drive(0).expect("drive");
-        assert_eq!((d.al_state, d.al_error, d.al_status_code), (al::INIT, true, 0x0011));
+        assert_eq!(
+            (d.al_state, d.al_error, d.al_status_code),
+            (al::INIT, true, 0x0011)
+        );
         // Without acknowledge the request is ignored; with it the error clears.
-        e.handle_frame(&frame(cmd::APWR, 0, 0x0120, &[al::INIT, 0])).expect("answer");
+        e.handle_frame(&frame(cmd::APWR, 0, 0x0120, &[al::INIT, 0]))
+            .expect("answer");
         assert!(e.drive(0).expect("drive").al_error);
-        e.handle_frame(&frame(cmd::APWR, 0, 0x0120, &[al::INIT | 0x10, 0])).expect("answer");
+        e.handle_frame(&frame(cmd::APWR, 0, 0x0120, &[al::INIT | 0x10, 0]))
+            .expect("answer");
         assert!(!e.drive(0).expect("drive").al_error);
-        e.handle_frame(&frame(cmd::APWR, 0, 0x0120, &[al::PRE_OP, 0])).expect("answer");
+        e.handle_frame(&frame(cmd::APWR, 0, 0x0120, &[al::PRE_OP, 0]))
+            .expect("answer");
         let d = e.drive(0).expect("drive");
-        assert_eq!((d.al_state, d.al_status_code), (al::INIT, 0x0016), "no mailbox SMs");
+        assert_eq!(
+            (d.al_state, d.al_status_code),
+            (al::INIT, 0x0016),
+            "no mailbox SMs"
+        );
     }
 }

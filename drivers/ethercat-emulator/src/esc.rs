@@ -194,7 +194,9 @@ impl SubDevice {
 
     /// Which SyncManager (0-3) covers `addr`, if any.
     fn sm_at(&self, addr: u32) -> Option<(usize, Sm)> {
-        (0..4).map(|n| (n, self.sm(n))).find(|(_, sm)| sm.covers(addr))
+        (0..4)
+            .map(|n| (n, self.sm(n)))
+            .find(|(_, sm)| sm.covers(addr))
     }
 
     /// A physical read of `out.len()` bytes at `addr` (APRD/FPRD/BRD and the read half
@@ -207,7 +209,10 @@ impl SubDevice {
         }
         if overlaps(a, out.len(), REG_DC_SYSTEM_TIME, 8) {
             let offset = self.u64(REG_DC_OFFSET);
-            self.put(REG_DC_SYSTEM_TIME, &now_ns.wrapping_add(offset).to_le_bytes());
+            self.put(
+                REG_DC_SYSTEM_TIME,
+                &now_ns.wrapping_add(offset).to_le_bytes(),
+            );
         }
         let mut clear_full = None;
         if let Some((n, sm)) = self.sm_at(a) {
@@ -366,7 +371,8 @@ impl SubDevice {
     fn freeze_process_data(&mut self) -> Result<(), u16> {
         let rx = self.drive.od.layout(true);
         let tx = self.drive.od.layout(false);
-        let bytes = |l: &[MappedObject]| l.iter().map(|m| u32::from(m.bits)).sum::<u32>().div_ceil(8);
+        let bytes =
+            |l: &[MappedObject]| l.iter().map(|m| u32::from(m.bits)).sum::<u32>().div_ceil(8);
         let (sm2, sm3) = (self.sm(2), self.sm(3));
         let fits = |sm: Sm, n: u32, writes: bool| {
             if n == 0 {
@@ -423,7 +429,12 @@ impl SubDevice {
                 did_write = true;
             }
         }
-        u16::from(did_read) + if did_write { if read { 2 } else { 1 } } else { 0 }
+        u16::from(did_read)
+            + if did_write {
+                if read { 2 } else { 1 }
+            } else {
+                0
+            }
     }
 
     /// The application deactivates the process data SyncManagers outside their states:
@@ -525,4 +536,3 @@ fn writable(r: usize) -> bool {
         _ => r < MEM_SIZE,
     }
 }
-

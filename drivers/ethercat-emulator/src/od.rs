@@ -112,7 +112,9 @@ impl ObjectDictionary {
     }
 
     pub fn u8(&self, index: u16, sub: u8) -> u8 {
-        self.get(index, sub).and_then(|d| d.first().copied()).unwrap_or(0)
+        self.get(index, sub)
+            .and_then(|d| d.first().copied())
+            .unwrap_or(0)
     }
 
     pub fn u16(&self, index: u16, sub: u8) -> u16 {
@@ -132,7 +134,10 @@ impl ObjectDictionary {
     }
 
     fn object_exists(&self, index: u16) -> bool {
-        self.entries.range((index, 0)..=(index, u8::MAX)).next().is_some()
+        self.entries
+            .range((index, 0)..=(index, u8::MAX))
+            .next()
+            .is_some()
     }
 
     /// SDO upload (read) of one entry.
@@ -270,7 +275,13 @@ mod tests {
         od.insert(RXPDO_MAP, 0, &[1], Access::RwPreOp, Mappable::No);
         for i in 1..=MAX_MAPPED {
             let v = if i == 1 { mapping(0x6040, 0, 16) } else { 0 };
-            od.insert(RXPDO_MAP, i, &v.to_le_bytes(), Access::RwPreOp, Mappable::No);
+            od.insert(
+                RXPDO_MAP,
+                i,
+                &v.to_le_bytes(),
+                Access::RwPreOp,
+                Mappable::No,
+            );
         }
         od
     }
@@ -279,14 +290,26 @@ mod tests {
     fn mapping_rules_match_the_standard() {
         let mut od = od();
         let v = mapping(0x6041, 0, 16).to_le_bytes();
-        assert_eq!(od.download(RXPDO_MAP, 1, &v, true), Err(abort::SUBINDEX0_NOT_ZERO));
+        assert_eq!(
+            od.download(RXPDO_MAP, 1, &v, true),
+            Err(abort::SUBINDEX0_NOT_ZERO)
+        );
         od.download(RXPDO_MAP, 0, &[0], true).expect("clear");
         od.download(RXPDO_MAP, 1, &v, true).expect("entry");
-        assert_eq!(od.download(RXPDO_MAP, 0, &[1], true), Err(abort::NOT_MAPPABLE));
-        assert_eq!(od.download(RXPDO_MAP, 0, &[0], false), Err(abort::DEVICE_STATE));
+        assert_eq!(
+            od.download(RXPDO_MAP, 0, &[1], true),
+            Err(abort::NOT_MAPPABLE)
+        );
+        assert_eq!(
+            od.download(RXPDO_MAP, 0, &[0], false),
+            Err(abort::DEVICE_STATE)
+        );
         assert_eq!(od.upload(0x2000, 0), Err(abort::NO_OBJECT));
         assert_eq!(od.upload(0x6040, 1), Err(abort::NO_SUBINDEX));
         assert_eq!(od.download(0x6041, 0, &[1, 0], true), Err(abort::READ_ONLY));
-        assert_eq!(od.download(0x6040, 0, &[1], true), Err(abort::LENGTH_MISMATCH));
+        assert_eq!(
+            od.download(0x6040, 0, &[1], true),
+            Err(abort::LENGTH_MISMATCH)
+        );
     }
 }

@@ -97,7 +97,10 @@ impl RawSocket {
         };
         if n < 0 {
             let e = io::Error::last_os_error();
-            return if matches!(e.kind(), io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted) {
+            return if matches!(
+                e.kind(),
+                io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+            ) {
                 Ok(None)
             } else {
                 Err(e)

@@ -69,7 +69,13 @@ pub(crate) fn image(cfg: &DriveConfig, od: &ObjectDictionary) -> Vec<u8> {
     // 0x0010-0x0013 reserved, 0x0014-0x0017 bootstrap mailbox (none).
     v.resize(0x18 * 2, 0);
     // 0x0018-0x001C standard mailbox: receive offset/size, send offset/size, protocols.
-    for w in [MBX_OUT_START, MBX_SIZE, MBX_IN_START, MBX_SIZE, MBX_PROTO_COE] {
+    for w in [
+        MBX_OUT_START,
+        MBX_SIZE,
+        MBX_IN_START,
+        MBX_SIZE,
+        MBX_PROTO_COE,
+    ] {
         push_u16(&mut v, w);
     }
     v.resize(0x3E * 2, 0);

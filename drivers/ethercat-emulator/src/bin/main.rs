@@ -9,9 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 use clap::Parser;
-use microrobot_ethercat_emulator::{
-    ChainConfig, Emulator, Fault, PlantKind, TimeMode, raw_socket,
-};
+use microrobot_ethercat_emulator::{ChainConfig, Emulator, Fault, PlantKind, TimeMode, raw_socket};
 
 /// Emulated EtherCAT CiA 402 drive chain on a raw socket.
 #[derive(Debug, Parser)]
