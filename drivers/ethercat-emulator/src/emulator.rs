@@ -501,16 +501,13 @@ fn physical(
 ) -> u16 {
     match command {
         cmd::APRD | cmd::FPRD => u16::from(s.read(ado, data, t)),
-        cmd::BRD => {
-            if s.read(ado, buf, t) {
-                for (d, b) in data.iter_mut().zip(buf.iter()) {
-                    *d |= *b;
-                }
-                1
-            } else {
-                0
+        cmd::BRD if s.read(ado, buf, t) => {
+            for (d, b) in data.iter_mut().zip(buf.iter()) {
+                *d |= *b;
             }
+            1
         }
+        cmd::BRD => 0,
         cmd::APWR | cmd::FPWR | cmd::BWR => u16::from(s.write(ado, data, t)),
         cmd::APRW | cmd::FPRW | cmd::BRW => {
             let written = data.to_vec();

@@ -215,14 +215,12 @@ impl SubDevice {
             );
         }
         let mut clear_full = None;
-        if let Some((n, sm)) = self.sm_at(a) {
-            if sm.is_mailbox() {
-                if sm.master_writes() || !self.mailbox_full(n) {
-                    return false;
-                }
-                if a + out.len() as u32 > sm.last() {
-                    clear_full = Some(n);
-                }
+        if let Some((n, sm)) = self.sm_at(a).filter(|(_, sm)| sm.is_mailbox()) {
+            if sm.master_writes() || !self.mailbox_full(n) {
+                return false;
+            }
+            if a + out.len() as u32 > sm.last() {
+                clear_full = Some(n);
             }
         }
         let s = usize::from(addr);
@@ -241,14 +239,12 @@ impl SubDevice {
             return false;
         }
         let mut mailbox_written = None;
-        if let Some((n, sm)) = self.sm_at(a) {
-            if sm.is_mailbox() {
-                if !sm.master_writes() || self.mailbox_full(n) {
-                    return false;
-                }
-                if a + data.len() as u32 > sm.last() {
-                    mailbox_written = Some(n);
-                }
+        if let Some((n, sm)) = self.sm_at(a).filter(|(_, sm)| sm.is_mailbox()) {
+            if !sm.master_writes() || self.mailbox_full(n) {
+                return false;
+            }
+            if a + data.len() as u32 > sm.last() {
+                mailbox_written = Some(n);
             }
         }
         for (i, &b) in data.iter().enumerate() {
@@ -305,10 +301,10 @@ impl SubDevice {
                 let b = self.sii.get(word * 2 + i).copied().unwrap_or(0xFF);
                 self.mem[REG_SII_DATA as usize + i] = b;
             }
-        } else if ctl & 0x0200 != 0 {
-            if let Some(w) = self.sii.get_mut(word * 2..word * 2 + 2) {
-                w.copy_from_slice(&self.mem[REG_SII_DATA as usize..REG_SII_DATA as usize + 2]);
-            }
+        } else if ctl & 0x0200 != 0
+            && let Some(w) = self.sii.get_mut(word * 2..word * 2 + 2)
+        {
+            w.copy_from_slice(&self.mem[REG_SII_DATA as usize..REG_SII_DATA as usize + 2]);
         }
         // Done at once: not busy, no error; 8-byte reads (bit 6).
         self.mem[REG_SII_CONTROL as usize] = 0x40 | (ctl as u8 & 0x01);
@@ -478,10 +474,11 @@ impl SubDevice {
         let mut off = usize::from(self.sm(3).start);
         for m in &self.tx_layout {
             let n = usize::from(m.bits / 8);
-            if let Some(src) = self.drive.od.get(m.index, m.sub) {
-                if off + n <= MEM_SIZE && src.len() >= n {
-                    self.mem[off..off + n].copy_from_slice(&src[..n]);
-                }
+            if let Some(src) = self.drive.od.get(m.index, m.sub)
+                && off + n <= MEM_SIZE
+                && src.len() >= n
+            {
+                self.mem[off..off + n].copy_from_slice(&src[..n]);
             }
             off += n;
         }

@@ -106,7 +106,7 @@ impl RawSocket {
                 Err(e)
             };
         }
-        if from.sll_pkttype == libc::PACKET_OUTGOING as u8 {
+        if from.sll_pkttype == libc::PACKET_OUTGOING {
             return Ok(None);
         }
         Ok(Some(n as usize))
