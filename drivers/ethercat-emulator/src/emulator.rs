@@ -28,6 +28,46 @@ pub struct Reply {
     pub delay: Duration,
 }
 
+/// Replies held back by a late-frame fault, released when due; the transports keep
+/// answering other frames meanwhile.
+#[derive(Debug, Default)]
+pub(crate) struct LateFrames {
+    held: Vec<(Instant, Vec<u8>)>,
+}
+
+impl LateFrames {
+    /// Holds `reply` until `delay` from now.
+    pub fn hold(&mut self, reply: Reply) {
+        self.held.push((Instant::now() + reply.delay, reply.frame));
+    }
+
+    /// Takes the frames that are due.
+    pub fn due(&mut self) -> Vec<Vec<u8>> {
+        let now = Instant::now();
+        let mut out = Vec::new();
+        let mut i = 0;
+        while i < self.held.len() {
+            if self.held[i].0 <= now {
+                out.push(self.held.remove(i).1);
+            } else {
+                i += 1;
+            }
+        }
+        out
+    }
+
+    /// Time until the next frame is due, at most `cap`.
+    pub fn wait(&self, cap: Duration) -> Duration {
+        let now = Instant::now();
+        self.held
+            .iter()
+            .map(|(t, _)| t.saturating_duration_since(now))
+            .min()
+            .unwrap_or(cap)
+            .min(cap)
+    }
+}
+
 /// Frame statistics since the start.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Counters {
@@ -577,6 +617,47 @@ mod tests {
             assert!(e.handle_frame(&bad[..cut]).is_none());
         }
         assert_eq!(e.counters().malformed, bad.len() as u64 - 13);
+    }
+
+    #[test]
+    fn random_and_truncated_frames_never_panic() {
+        let e = Emulator::new(&ChainConfig::inertia_chain(2)).expect("chain");
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for _ in 0..20_000 {
+            let r = next();
+            let command = (r % 16) as u8;
+            let adp = if r & 0x100 != 0 {
+                0x1000
+            } else {
+                (r >> 16) as u16
+            };
+            // Mostly registers and the process RAM, sometimes anywhere.
+            let ado = if r & 0x200 != 0 {
+                (r >> 32) as u16
+            } else {
+                ((r >> 32) % 0x2100) as u16
+            };
+            let len = ((r >> 48) % 80) as usize;
+            let data: Vec<u8> = (0..len).map(|_| next() as u8).collect();
+            let mut f = frame(command, adp, ado, &data);
+            match next() % 4 {
+                0 => f.truncate((next() as usize) % f.len()),
+                1 => {
+                    let i = 14 + (next() as usize) % (f.len() - 14);
+                    f[i] = next() as u8;
+                }
+                _ => {}
+            }
+            let _ = e.handle_frame(&f);
+        }
+        let c = e.counters();
+        assert!(c.malformed > 0 && c.answered > 0, "{c:?}");
     }
 
     #[test]

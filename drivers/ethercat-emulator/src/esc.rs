@@ -498,9 +498,13 @@ impl SubDevice {
         else {
             return;
         };
+        // The master may have rewritten SM1 since PRE-OP: answer only into RAM.
         let inp = self.sm(1);
         let s = usize::from(inp.start);
-        let len = usize::from(inp.len).min(MEM_SIZE - s);
+        let len = usize::from(inp.len).min(MEM_SIZE.saturating_sub(s));
+        if len == 0 {
+            return;
+        }
         self.mem[s..s + len].fill(0);
         let n = resp.len().min(len);
         self.mem[s..s + n].copy_from_slice(&resp[..n]);

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use ethercrab::{PduRx, PduTx};
 
-use crate::emulator::Emulator;
+use crate::emulator::{Emulator, LateFrames};
 
 /// Wakes the link thread when ethercrab has a frame to send.
 struct ThreadWaker(Thread);
@@ -26,9 +26,9 @@ impl Wake for ThreadWaker {
 
 /// A running in-process link between an ethercrab `MainDevice` and an [`Emulator`].
 ///
-/// Each frame the MainDevice sends is answered at once (or after an injected delay,
-/// by which time the MainDevice may have given up on it, as with a late frame on a
-/// real wire). Dropping the link stops its thread.
+/// Each frame the MainDevice sends is answered at once, or after an injected delay
+/// while later frames are answered meanwhile (the MainDevice may have given up on the
+/// late one, as with a late frame on a real wire). Dropping the link stops its thread.
 #[derive(Debug)]
 pub struct InProcessLink {
     stop: Arc<AtomicBool>,
@@ -48,6 +48,7 @@ impl InProcessLink {
             .name("ecat-emulator-link".into())
             .spawn(move || {
                 let waker = Waker::from(Arc::new(ThreadWaker(thread::current())));
+                let mut late = LateFrames::default();
                 while !stop2.load(Ordering::Acquire) && !tx.should_exit() {
                     tx.replace_waker(&waker);
                     while let Some(frame) = tx.next_sendable_frame() {
@@ -56,19 +57,20 @@ impl InProcessLink {
                             reply = emulator.handle_frame(bytes);
                             Ok(bytes.len())
                         });
-                        if sent.is_err() {
-                            continue;
-                        }
-                        if let Some(reply) = reply {
-                            if !reply.delay.is_zero() {
-                                thread::sleep(reply.delay);
+                        match reply {
+                            Some(r) if sent.is_ok() && r.delay.is_zero() => {
+                                let _ = rx.receive_frame(&r.frame);
                             }
-                            // A frame the MainDevice no longer waits for is refused:
-                            // exactly what a late frame on the wire meets.
-                            let _ = rx.receive_frame(&reply.frame);
+                            Some(r) if sent.is_ok() => late.hold(r),
+                            _ => {}
                         }
                     }
-                    thread::park_timeout(Duration::from_millis(2));
+                    for frame in late.due() {
+                        // A frame the MainDevice no longer waits for is refused:
+                        // exactly what a late frame on the wire meets.
+                        let _ = rx.receive_frame(&frame);
+                    }
+                    thread::park_timeout(late.wait(Duration::from_millis(2)));
                 }
             })?;
         Ok(InProcessLink {

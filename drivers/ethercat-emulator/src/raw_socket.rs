@@ -7,7 +7,7 @@ use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use crate::emulator::{ETHERCAT_ETHERTYPE, Emulator};
+use crate::emulator::{ETHERCAT_ETHERTYPE, Emulator, LateFrames};
 
 /// An AF_PACKET raw socket receiving and sending EtherCAT frames on one interface.
 #[derive(Debug)]
@@ -147,18 +147,22 @@ impl RawSocket {
 /// are ignored, as are malformed ones (counted in [`Emulator::counters`]).
 pub fn serve(emulator: &Emulator, socket: &RawSocket, stop: &AtomicBool) -> io::Result<()> {
     let mut buf = vec![0u8; 2048];
+    let mut late = LateFrames::default();
     while !stop.load(Ordering::Acquire) {
-        let Some(n) = socket.recv(&mut buf, Duration::from_millis(50))? else {
+        for frame in late.due() {
+            socket.send(&frame)?;
+        }
+        let wait = late.wait(Duration::from_millis(50));
+        let Some(n) = socket.recv(&mut buf, wait)? else {
             continue;
         };
         let Some(frame) = buf.get(..n) else {
             continue;
         };
-        if let Some(reply) = emulator.handle_frame(frame) {
-            if !reply.delay.is_zero() {
-                std::thread::sleep(reply.delay);
-            }
-            socket.send(&reply.frame)?;
+        match emulator.handle_frame(frame) {
+            Some(reply) if reply.delay.is_zero() => socket.send(&reply.frame)?,
+            Some(reply) => late.hold(reply),
+            None => {}
         }
     }
     Ok(())
