@@ -391,11 +391,9 @@ mod tests {
 
     #[test]
     fn the_example_file_is_the_seed_arm_on_the_wall_clock() {
-        let c = ChainConfig::from_toml_str(
-            include_str!("../example.chain.toml"),
-            "example.chain.toml",
-        )
-        .expect("valid example");
+        let c =
+            ChainConfig::from_toml_str(include_str!("../example.chain.toml"), "example.chain.toml")
+                .expect("valid example");
         let mut seed = ChainConfig::seed_arm();
         seed.time = TimeMode::WallClock { max_step_s: 0.01 };
         assert_eq!(c, seed);

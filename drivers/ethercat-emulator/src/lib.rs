@@ -15,6 +15,8 @@
 //!
 //! See the crate README for what is emulated and what is not.
 
+#![warn(missing_docs)]
+
 pub mod config;
 pub mod fault;
 pub mod plant;
