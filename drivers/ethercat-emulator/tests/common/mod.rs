@@ -14,8 +14,10 @@ use microrobot_ethercat_cia402::cia402::{Axis, Statusword, Step};
 use microrobot_ethercat_emulator::{ChainConfig, Emulator, InProcessLink};
 
 pub const MAX_SUBDEVICES: usize = 8;
-/// PDU timeout of the tests' MainDevice: long enough for a loaded 2-core machine,
-/// short enough that the lost and late frame checks take a fraction of a second.
+/// PDU (and EEPROM busy-wait) timeout of the tests' MainDevice: long enough for a
+/// loaded 2-core machine running the tests in parallel (ethercrab's 10 ms EEPROM
+/// default is one round trip there), short enough that the lost and late frame checks
+/// take a fraction of a second.
 pub const PDU_TIMEOUT: Duration = Duration::from_millis(100);
 pub const PDI_LEN: usize = 256;
 const MAX_FRAMES: usize = 16;
@@ -44,6 +46,7 @@ pub fn bus(config: &ChainConfig) -> Bus {
         pdu_loop,
         Timeouts {
             pdu: PDU_TIMEOUT,
+            eeprom: PDU_TIMEOUT,
             ..Timeouts::default()
         },
         MainDeviceConfig {
