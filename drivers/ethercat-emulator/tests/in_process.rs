@@ -32,6 +32,15 @@ fn seed_arm_is_discovered_configured_enabled_and_moves() {
             assert_eq!(id.serial, 0x1000 + i as u32);
             assert_eq!(sd.sdo_read::<u32>(0x1018, 1).await, Ok(SEED_VENDOR_ID));
             assert_eq!(sd.sdo_read::<u32>(0x1000, 0).await, Ok(0x0002_0192));
+            // More than 4 bytes: a normal (not expedited) upload.
+            let name = format!("MR-SERVO-J{}", i + 1);
+            assert_eq!(
+                sd.sdo_read::<[u8; 11]>(0x1008, 0)
+                    .await
+                    .as_ref()
+                    .map(|n| &n[..]),
+                Ok(name.as_bytes())
+            );
             let rated_mnm = if i < 3 { 1270 } else { 640 };
             assert_eq!(sd.sdo_read::<u32>(0x6076, 0).await, Ok(rated_mnm));
             sd.sdo_write(0x6060, 0, MODE_CST).await.expect("mode CST");
