@@ -8,9 +8,9 @@ use common::{MAX_SUBDEVICES, PDI_LEN, PDU_TIMEOUT, bus, cycle};
 use ethercrab::error::{Error, MailboxError};
 use ethercrab::std::ethercat_now;
 use ethercrab::{AlStatusCode, SubDeviceState, error::CoeAbortCode};
-use microrobot_ethercat_cia402::cia402::{Axis, AxisFault, DriveState, Target};
+use microrobot_ethercat_cia402::cia402::{Axis, AxisFault, DriveState, Statusword, Target};
 use microrobot_ethercat_emulator::config::{SEED_PRODUCT_CODE, SEED_VENDOR_ID};
-use microrobot_ethercat_emulator::{ChainConfig, Fault, MODE_CST};
+use microrobot_ethercat_emulator::{ChainConfig, Fault, MODE_CSP, MODE_CST};
 
 #[test]
 fn seed_arm_is_discovered_configured_enabled_and_moves() {
@@ -299,4 +299,43 @@ fn a_link_down_chain_is_not_discovered() {
             .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercat_now),
     );
     assert!(matches!(r, Err(Error::Timeout(_))), "{:?}", r.err());
+}
+
+#[test]
+fn csp_mode_follows_the_target_position() {
+    let b = bus(&ChainConfig::inertia_chain(1));
+    let md = &b.maindevice;
+    block_on(async {
+        let group = md
+            .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercat_now)
+            .await
+            .expect("PRE-OP");
+        let sd = group.subdevice(md, 0).expect("drive 0");
+        sd.sdo_write(0x6060, 0, MODE_CSP).await.expect("mode CSP");
+        let group = group.into_op(md).await.expect("OP");
+        let mut axis = Axis::new();
+        axis.set_target(Target::Enabled);
+        // 0.1 rad at the joint: 2^20 counts per motor revolution, gear 100.
+        let target = (0.1 * f64::from(1u32 << 20) * 100.0 / std::f64::consts::TAU) as i32;
+        let mut last = None;
+        for _ in 0..400 {
+            group.tx_rx(md).await.expect("cycle");
+            let sd = group.subdevice(md, 0).expect("drive 0");
+            let mut io = sd.io_raw_mut();
+            let inp = io.inputs().to_vec();
+            let sw = Statusword(u16::from_le_bytes([inp[0], inp[1]]));
+            let step = axis.step(sw.state().expect("defined"), 0);
+            let out = io.outputs();
+            out[0..2].copy_from_slice(&step.controlword.bits().to_le_bytes());
+            out[4..8].copy_from_slice(&target.to_le_bytes());
+            last = Some(i32::from_le_bytes([inp[2], inp[3], inp[4], inp[5]]));
+        }
+        let reached = last.expect("cycles ran");
+        let error = (reached - target).abs();
+        assert!(
+            error < target / 100,
+            "position {reached} for target {target}"
+        );
+        assert_eq!(b.emulator.drive(0).expect("drive 0").mode, MODE_CSP);
+    });
 }
