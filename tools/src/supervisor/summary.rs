@@ -548,6 +548,13 @@ impl Summary {
                 x.count, x.p50, x.p99, x.p999, x.max, x.mean
             );
         }
+        let untaken = h.dynamics_compute_us.count.saturating_sub(e.count);
+        if untaken > 0 {
+            let _ = writeln!(
+                s,
+                "    ({untaken} torque(s) the dynamics published were not taken by the actuator: in flight at the stop, lost or refused; the + rows count them, the end-to-end row does not)"
+            );
+        }
     }
 
     /// The human-readable summary.
