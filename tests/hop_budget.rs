@@ -63,7 +63,10 @@ fn a_run_summary_splits_the_end_to_end_latency_into_hops_that_add_up() {
     let streams = rec.finish();
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     let s = summary(&summary_path);
+    // Every torque the actuator saw it took (what it refused or lost would be neither
+    // taken nor in flight).
     assert_eq!(s["lost_messages"], 0, "{s}");
+    assert_eq!(s["refused_messages"], 0, "{s}");
 
     // The printed summary has the table.
     for row in [
@@ -119,11 +122,6 @@ fn a_run_summary_splits_the_end_to_end_latency_into_hops_that_add_up() {
     // still in flight at the stop was published but never taken).
     let last_taken = st.last().map_or(u64::MAX, |m| m.torque_seq);
     let (taken, untaken): (Vec<_>, Vec<_>) = tq.iter().partition(|t| t.header.seq <= last_taken);
-    assert!(
-        untaken.len() <= 2,
-        "{} torques never taken: {s}",
-        untaken.len()
-    );
     let e2e = &s["e2e_latency_us"];
     assert_eq!(e2e["count"].as_u64(), Some(taken.len() as u64), "{s}");
     assert_eq!(count("torque_to_actuator_us"), taken.len() as u64, "{s}");

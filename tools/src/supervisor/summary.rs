@@ -739,6 +739,47 @@ mod tests {
     }
 
     #[test]
+    fn hops_are_summed_over_restarts_with_exact_means() {
+        let hop = |count, sum_ns, max_ns| HopLatency {
+            count,
+            sum_ns,
+            p50_ns: max_ns / 2,
+            p99_ns: max_ns,
+            p999_ns: max_ns,
+            max_ns,
+        };
+        let mut dynamics = ServiceStatus::default();
+        dynamics.hops = [hop(2, 30_000, 20_000), hop(2, 10_000, 6_000)];
+        let mut again = dynamics;
+        again.hops = [hop(1, 3_000, 3_000), hop(1, 2_000, 2_000)];
+        let mut acc = ServiceStatus::default();
+        fold(&mut acc, &dynamics);
+        fold(&mut acc, &again);
+        assert_eq!(acc.hops[0], hop(3, 33_000, 20_000));
+        let mut actuator = ServiceStatus::default();
+        actuator.latency.count = 3;
+        actuator.latency.max_ns = 40_000;
+        actuator.latency_sum_ns = 60_000;
+        actuator.hops[0] = hop(3, 15_000, 9_000);
+        let totals = [None, Some(acc), Some(actuator)];
+        let exits = [String::new(), String::new(), String::new()];
+        let s = Summary::build(facts(&[("a", false)]), &totals, &[0, 1, 0], &exits);
+        let json = serde_json::to_value(&s).expect("json");
+        let h = &json["hops"];
+        assert_eq!(h["setpoint_to_dynamics_us"]["count"], 3);
+        assert_eq!(h["setpoint_to_dynamics_us"]["mean"], 11.0);
+        assert_eq!(h["dynamics_compute_us"]["mean"], 4.0);
+        assert_eq!(h["torque_to_actuator_us"]["mean"], 5.0);
+        assert_eq!(json["e2e_latency_us"]["mean"], 20.0);
+        // No sample: the hop is there with zeros.
+        assert_eq!(h["planner_wake_to_setpoint_us"]["count"], 0);
+        assert_eq!(h["actuator_step_to_state_us"]["mean"], 0.0);
+        let text = s.render();
+        assert!(text.contains("= end-to-end"), "{text}");
+        assert!(!text.contains("not taken"), "{text}");
+    }
+
+    #[test]
     fn a_prismatic_joint_is_summarised_in_m_and_n() {
         let mut dynamics = ServiceStatus::default();
         dynamics.peak_torque[0] = 2.0;
