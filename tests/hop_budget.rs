@@ -129,8 +129,8 @@ fn a_run_summary_splits_the_end_to_end_latency_into_hops_that_add_up() {
     // Sums, exact in ns: the services' final statuses against every torque's stamps.
     let dynamics = last_status(&streams.statuses, ServiceRole::Dynamics);
     let actuator = last_status(&streams.statuses, ServiceRole::Actuator);
-    let published_ns: u64 = tq.iter().map(|t| setpoint_to_torque_ns(t)).sum();
-    let taken_ns: u64 = taken.iter().map(|t| setpoint_to_torque_ns(t)).sum();
+    let published_ns: u64 = tq.iter().map(setpoint_to_torque_ns).sum();
+    let taken_ns: u64 = taken.iter().copied().map(setpoint_to_torque_ns).sum();
     let untaken_ns = published_ns - taken_ns;
     assert_eq!(
         dynamics.hops[0].sum_ns + dynamics.hops[1].sum_ns,

@@ -748,19 +748,28 @@ mod tests {
             p999_ns: max_ns,
             max_ns,
         };
-        let mut dynamics = ServiceStatus::default();
-        dynamics.hops = [hop(2, 30_000, 20_000), hop(2, 10_000, 6_000)];
-        let mut again = dynamics;
-        again.hops = [hop(1, 3_000, 3_000), hop(1, 2_000, 2_000)];
+        let dynamics = ServiceStatus {
+            hops: [hop(2, 30_000, 20_000), hop(2, 10_000, 6_000)],
+            ..ServiceStatus::default()
+        };
+        let again = ServiceStatus {
+            hops: [hop(1, 3_000, 3_000), hop(1, 2_000, 2_000)],
+            ..dynamics
+        };
         let mut acc = ServiceStatus::default();
         fold(&mut acc, &dynamics);
         fold(&mut acc, &again);
         assert_eq!(acc.hops[0], hop(3, 33_000, 20_000));
-        let mut actuator = ServiceStatus::default();
-        actuator.latency.count = 3;
-        actuator.latency.max_ns = 40_000;
-        actuator.latency_sum_ns = 60_000;
-        actuator.hops[0] = hop(3, 15_000, 9_000);
+        let actuator = ServiceStatus {
+            latency: LatencySummary {
+                count: 3,
+                max_ns: 40_000,
+                ..LatencySummary::default()
+            },
+            latency_sum_ns: 60_000,
+            hops: [hop(3, 15_000, 9_000), HopLatency::default()],
+            ..ServiceStatus::default()
+        };
         let totals = [None, Some(acc), Some(actuator)];
         let exits = [String::new(), String::new(), String::new()];
         let s = Summary::build(facts(&[("a", false)]), &totals, &[0, 1, 0], &exits);
