@@ -121,15 +121,6 @@ impl HopBudget {
             actuator_step_to_state_us: HopStats::from(&actuator.hops[1]),
         }
     }
-
-    /// The hops inside the end-to-end latency, in chain order.
-    pub fn inside_e2e(&self) -> [&HopStats; 3] {
-        [
-            &self.setpoint_to_dynamics_us,
-            &self.dynamics_compute_us,
-            &self.torque_to_actuator_us,
-        ]
-    }
 }
 
 /// One service over the whole run.
