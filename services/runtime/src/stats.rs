@@ -84,9 +84,7 @@ impl LatencyHistogram {
             max_ns: self.hist.max(),
         }
     }
-}
 
-impl LatencyHistogram {
     /// Count, exact sum and percentiles, as a status carries one hop (zeros when empty).
     pub fn hop_latency(&self) -> HopLatency {
         let l = self.summary();
