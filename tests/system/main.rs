@@ -17,6 +17,7 @@ mod driver_check;
 mod error_messages;
 mod estop;
 mod faults;
+mod hop_budget;
 mod inspect;
 mod lifecycle;
 mod pipeline;

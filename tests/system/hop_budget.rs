@@ -4,9 +4,7 @@
 //! bus and the services' final statuses. Latencies themselves are never held to a
 //! wall-clock figure (the machine is shared); only structure, counts and sums.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use microrobot_messages::{ServiceRole, ServiceStatus, TorqueCommand, state_flags};
 
 /// The hop keys of the summary's `hops` object, in chain order.
