@@ -2,7 +2,9 @@
 //! (the arm's forward dynamics) can drive the whole chain; values are joint-side SI
 //! units (rad, rad/s, N·m) and the drives convert to motor counts and per mille.
 
-use microrobot_model::{JointVector, MAX_JOINTS, ModelData, Robot, forward_dynamics};
+use microrobot_actuator::plant::ArmPlant;
+use microrobot_model::{JointVector, MAX_JOINTS, Robot};
+use microrobot_runtime::config::Integrator;
 
 /// A plant of `axes()` joints, stepped once per process data exchange.
 pub trait Plant: Send {
@@ -68,22 +70,20 @@ impl Plant for InertiaPlant {
     }
 }
 
-/// The seed arm (config/robots/seed-arm.toml): forward dynamics of
-/// `microrobot-model`, `qdd = M(q)⁻¹ (τ − h(q, qd))`, semi-implicit Euler with 1 ms
-/// substeps, hard stops at the joint limits. Braked axes are held: their velocity is
-/// zeroed after each substep (the coupling torque they would take is not modelled).
+/// The seed arm (config/robots/seed-arm.toml) moved by the simulated arm's own plant
+/// ([`ArmPlant`]: the forward dynamics of `microrobot-model`, classic RK4, hard stops
+/// at the joint limits) in substeps of at most 1 ms. Braked axes are held where they
+/// are (the torque their brake takes is not modelled).
 #[derive(Debug, Clone)]
 pub struct SeedArmPlant {
-    robot: Robot,
-    data: ModelData,
-    q: JointVector,
-    qd: JointVector,
-    q_min: JointVector,
-    q_max: JointVector,
+    plant: ArmPlant,
 }
 
 /// The seed arm's description, built into the crate.
 const SEED_ARM_TOML: &str = include_str!("../../../config/robots/seed-arm.toml");
+
+/// The longest integration substep (s).
+const MAX_SUBSTEP_S: f64 = 1e-3;
 
 impl SeedArmPlant {
     /// The seed arm at rest at q = 0 (clamped into its limits).
@@ -95,63 +95,46 @@ impl SeedArmPlant {
 
     /// Any robot of the model crate (at most [`MAX_JOINTS`] joints), at rest at q = 0.
     pub fn from_robot(robot: Robot) -> SeedArmPlant {
-        let (q_min, q_max) = robot.position_limits();
-        let mut q = JointVector::zeros();
-        for i in 0..robot.dof().min(MAX_JOINTS) {
-            q[i] = 0.0f64.clamp(q_min[i], q_max[i]);
-        }
-        let data = ModelData::new(&robot);
         SeedArmPlant {
-            robot,
-            data,
-            q,
-            qd: JointVector::zeros(),
-            q_min,
-            q_max,
+            plant: ArmPlant::new(robot, 0.0, 0.0, Integrator::Rk4, 1, &JointVector::zeros()),
         }
     }
 }
 
 impl Plant for SeedArmPlant {
     fn axes(&self) -> usize {
-        self.robot.dof()
+        self.plant.dof()
     }
 
     fn step(&mut self, torque_nm: &[f64], braked: &[bool], dt_s: f64) {
-        let dof = self.robot.dof().min(MAX_JOINTS);
+        let dof = self.plant.dof();
         let mut tau = JointVector::zeros();
+        let mut held = [true; MAX_JOINTS];
         for i in 0..dof {
             tau[i] = torque_nm.get(i).copied().unwrap_or(0.0);
+            held[i] = braked.get(i).copied().unwrap_or(true);
         }
-        let substeps = (dt_s / 0.001).ceil().clamp(1.0, 1000.0) as usize;
-        let h = dt_s / substeps as f64;
+        let substeps = (dt_s / MAX_SUBSTEP_S).ceil().clamp(1.0, 1000.0) as usize;
         for _ in 0..substeps {
-            let a = forward_dynamics(&self.robot, &mut self.data, &self.q, &self.qd, &tau);
-            for i in 0..dof {
-                let held = braked.get(i).copied().unwrap_or(true);
-                if held || !a[i].is_finite() {
-                    self.qd[i] = 0.0;
-                    continue;
-                }
-                self.qd[i] += a[i] * h;
-                self.q[i] += self.qd[i] * h;
-                if self.q[i] < self.q_min[i] {
-                    self.q[i] = self.q_min[i];
-                    self.qd[i] = self.qd[i].max(0.0);
-                } else if self.q[i] > self.q_max[i] {
-                    self.q[i] = self.q_max[i];
-                    self.qd[i] = self.qd[i].min(0.0);
-                }
-            }
+            // A diverged step keeps the last good state (the arm stays put).
+            let _ = self.plant.step(&tau, dt_s / substeps as f64, &held[..dof]);
         }
     }
 
     fn position(&self, i: usize) -> f64 {
-        if i < MAX_JOINTS { self.q[i] } else { 0.0 }
+        if i < MAX_JOINTS {
+            self.plant.state().0[i]
+        } else {
+            0.0
+        }
     }
 
     fn velocity(&self, i: usize) -> f64 {
-        if i < MAX_JOINTS { self.qd[i] } else { 0.0 }
+        if i < MAX_JOINTS {
+            self.plant.state().1[i]
+        } else {
+            0.0
+        }
     }
 }
 

@@ -24,6 +24,7 @@
 
 pub mod backend;
 pub mod lifecycle;
+pub mod plant;
 pub mod resume;
 pub mod safety;
 mod serve;

@@ -1,5 +1,6 @@
 //! The simulated arm: an [`ActuatorBackend`] that integrates the forward dynamics of
-//! the robot model, `qdd = M(q)⁻¹ (τ_sat − h(q, qd) − τ_f,extra(qd))`.
+//! the robot model, `qdd = M(q)⁻¹ (τ_sat − h(q, qd) − τ_f,extra(qd))`, with the
+//! [`ArmPlant`] (`crate::plant`).
 //!
 //! * Integrator: classic RK4 (default) or semi-implicit Euler, with `substeps` equal
 //!   steps of `period / substeps` per `write()`; the torque is held constant over the
@@ -19,10 +20,11 @@
 //!
 //! Allocation-free after construction.
 
-use microrobot_model::{JointVector, ModelData, Robot, forward_dynamics};
-use microrobot_runtime::config::{Integrator, SimConfig};
+use microrobot_model::{JointVector, Robot};
+use microrobot_runtime::config::SimConfig;
 
 use crate::backend::{ActuatorBackend, Fault, Measured};
+use crate::plant::ArmPlant;
 
 /// SplitMix64 + Box-Muller: a tiny deterministic Gaussian source.
 #[derive(Debug, Clone)]
@@ -70,23 +72,14 @@ impl Gaussian {
 /// The simulated arm.
 #[derive(Debug, Clone)]
 pub struct SimArm {
-    plant: Robot,
-    data: ModelData,
+    plant: ArmPlant,
     dof: usize,
-    q: JointVector,
-    qd: JointVector,
     tau_applied: JointVector,
     saturated: bool,
     effort: JointVector,
-    q_min: JointVector,
-    q_max: JointVector,
-    viscous: f64,
-    coulomb: f64,
     noise_q: f64,
     noise_qd: f64,
     rng: Gaussian,
-    integrator: Integrator,
-    substeps: u32,
     /// Drives on (between `on_activate` and `on_deactivate`/a fault): torque is applied.
     enabled: bool,
 }
@@ -95,109 +88,44 @@ impl SimArm {
     /// A simulated copy of `model` (masses scaled by `cfg.mass_scale`) at rest at `q0`
     /// (clamped into the joint limits).
     pub fn new(model: &Robot, cfg: &SimConfig, q0: &JointVector) -> Self {
-        let plant = if cfg.mass_scale == 1.0 {
+        let robot = if cfg.mass_scale == 1.0 {
             model.clone()
         } else {
             model.with_scaled_link_masses(cfg.mass_scale)
         };
-        let dof = plant.dof();
+        let dof = robot.dof();
         let mut effort = JointVector::zeros();
-        let mut q = JointVector::zeros();
-        let (q_min, q_max) = plant.position_limits();
-        for (i, j) in plant.joints().iter().enumerate() {
+        for (i, j) in robot.joints().iter().enumerate() {
             effort[i] = j.limits.effort;
-            q[i] = j.limits.clamp(q0[i]);
         }
-        let data = ModelData::new(&plant);
         Self {
-            plant,
-            data,
+            plant: ArmPlant::new(
+                robot,
+                cfg.viscous_friction_nms,
+                cfg.coulomb_friction_nm,
+                cfg.integrator,
+                cfg.substeps,
+                q0,
+            ),
             dof,
-            q,
-            qd: JointVector::zeros(),
             tau_applied: JointVector::zeros(),
             saturated: false,
             effort,
-            q_min,
-            q_max,
-            viscous: cfg.viscous_friction_nms,
-            coulomb: cfg.coulomb_friction_nm,
             noise_q: cfg.sensor_noise_rad,
             noise_qd: cfg.sensor_noise_rad_s,
             rng: Gaussian::new(cfg.seed),
-            integrator: cfg.integrator,
-            substeps: cfg.substeps.max(1),
             enabled: false,
         }
     }
 
     /// The true (noise-free) state.
     pub fn true_state(&self) -> (JointVector, JointVector) {
-        (self.q, self.qd)
+        self.plant.state()
     }
 
     /// Sets the true state (tests, restarts).
     pub fn set_state(&mut self, q: &JointVector, qd: &JointVector) {
-        self.q = *q;
-        self.qd = *qd;
-    }
-
-    #[inline]
-    fn accel(&mut self, q: &JointVector, qd: &JointVector, tau: &JointVector) -> JointVector {
-        let mut t = *tau;
-        if self.viscous != 0.0 || self.coulomb != 0.0 {
-            for i in 0..self.dof {
-                let s = if qd[i] > 0.0 {
-                    1.0
-                } else if qd[i] < 0.0 {
-                    -1.0
-                } else {
-                    0.0
-                };
-                t[i] -= self.viscous * qd[i] + self.coulomb * s;
-            }
-        }
-        forward_dynamics(&self.plant, &mut self.data, q, qd, &t)
-    }
-
-    /// Integrates the plant over `dt` under the constant torque `tau` (already saturated).
-    fn integrate(&mut self, tau: &JointVector, dt: f64) {
-        let h = dt / self.substeps as f64;
-        for _ in 0..self.substeps {
-            let (q, qd) = (self.q, self.qd);
-            match self.integrator {
-                Integrator::SemiImplicitEuler => {
-                    let a = self.accel(&q, &qd, tau);
-                    self.qd = qd + a * h;
-                    self.q = q + self.qd * h;
-                }
-                Integrator::Rk4 => {
-                    let k1v = qd;
-                    let k1a = self.accel(&q, &qd, tau);
-                    let q2 = q + k1v * (h / 2.0);
-                    let v2 = qd + k1a * (h / 2.0);
-                    let k2a = self.accel(&q2, &v2, tau);
-                    let q3 = q + v2 * (h / 2.0);
-                    let v3 = qd + k2a * (h / 2.0);
-                    let k3a = self.accel(&q3, &v3, tau);
-                    let q4 = q + v3 * h;
-                    let v4 = qd + k3a * h;
-                    let k4a = self.accel(&q4, &v4, tau);
-                    self.q = q + (k1v + v2 * 2.0 + v3 * 2.0 + v4) * (h / 6.0);
-                    self.qd = qd + (k1a + k2a * 2.0 + k3a * 2.0 + k4a) * (h / 6.0);
-                }
-            }
-            // Hard stops.
-            for i in 0..self.dof {
-                if self.q[i] < self.q_min[i] {
-                    self.q[i] = self.q_min[i];
-                    self.qd[i] = self.qd[i].max(0.0);
-                } else if self.q[i] > self.q_max[i] {
-                    self.q[i] = self.q_max[i];
-                    self.qd[i] = self.qd[i].min(0.0);
-                }
-            }
-        }
+        self.plant.set_state(q, qd);
     }
 }
 
@@ -217,7 +145,7 @@ impl ActuatorBackend for SimArm {
 
     fn on_deactivate(&mut self) -> Result<(), Fault> {
         // Brakes on: the arm stops where it is.
-        self.qd = JointVector::zeros();
+        self.plant.stop();
         self.enabled = false;
         Ok(())
     }
@@ -227,7 +155,7 @@ impl ActuatorBackend for SimArm {
     }
 
     fn on_reset(&mut self) -> Result<(), Fault> {
-        self.qd = JointVector::zeros();
+        self.plant.stop();
         Ok(())
     }
 
@@ -247,13 +175,8 @@ impl ActuatorBackend for SimArm {
                 v
             };
         }
-        let (q0, qd0) = (self.q, self.qd);
-        self.integrate(&t, period_s);
-        let ok = (0..self.dof).all(|i| self.q[i].is_finite() && self.qd[i].is_finite());
-        if !ok {
-            // Keep the last good state; the arm is "stuck" until a fault reset.
-            self.q = q0;
-            self.qd = qd0;
+        if self.plant.step(&t, period_s, &[]).is_err() {
+            // The plant kept its last good state; the arm is "stuck" until a fault reset.
             return Err(Fault::drive(
                 FAULT_DIVERGED,
                 "forward dynamics diverged (singular mass matrix or non-finite state)",
@@ -264,9 +187,10 @@ impl ActuatorBackend for SimArm {
     }
 
     fn read(&mut self, _now_ns: u64) -> Result<Measured, Fault> {
+        let (q, qd) = self.plant.state();
         let mut m = Measured {
-            q: self.q,
-            qd: self.qd,
+            q,
+            qd,
             tau_applied: if self.enabled {
                 self.tau_applied
             } else {
@@ -287,7 +211,7 @@ impl ActuatorBackend for SimArm {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use microrobot_runtime::config::PipelineConfig;
+    use microrobot_runtime::config::{Integrator, PipelineConfig};
 
     /// A pendulum: point mass 1 kg at 0.5 m, no gravity along the swing plane when
     /// gravity is zero; here gravity along −y with the arm along x.
