@@ -17,10 +17,10 @@ const JOINTS: [&str; 6] = ["j1", "j2", "j3", "j4", "j5", "j6"];
 /// torque.
 fn drive_file(n: usize, rated_j1: f64) -> DriveFile {
     let text = include_str!("../example.drive.toml");
-    let mut parts = text.split("[[axis]]");
+    let mut parts = text.split("\n[[axis]]\n");
     let mut out = parts.next().expect("bus table").to_string();
     for (i, p) in parts.take(n).enumerate() {
-        out.push_str("[[axis]]");
+        out.push_str("\n[[axis]]\n");
         if i == 0 {
             out.push_str(&p.replace(
                 "rated_torque_nm = 1.27",
