@@ -121,3 +121,65 @@ fn mailbox_error(counter: u8, code: u16) -> Vec<u8> {
     b.extend_from_slice(&code.to_le_bytes());
     mailbox(counter, MBX_TYPE_ERR, &b)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::od::{Access, Mappable};
+
+    fn request(cmd: u8, index: u16, sub: u8, data: &[u8]) -> Vec<u8> {
+        let mut body = vec![0, COE_SDO_REQUEST << 4, cmd];
+        body.extend_from_slice(&index.to_le_bytes());
+        body.push(sub);
+        body.extend_from_slice(data);
+        let mut m = mailbox(0x10, MBX_TYPE_COE, &body);
+        m.resize(128, 0);
+        m
+    }
+
+    fn od() -> ObjectDictionary {
+        let mut od = ObjectDictionary::default();
+        od.insert(0x6040, 0, &[0, 0], Access::Rw, Mappable::Rx);
+        od.insert(0x1008, 0, b"a long device name", Access::Ro, Mappable::No);
+        od
+    }
+
+    #[test]
+    fn normal_download_and_upload_and_the_aborts() {
+        let mut od = od();
+        // Normal download: size 2, then the data.
+        let r = answer(
+            &request(0x21, 0x6040, 0, &[2, 0, 0, 0, 0x0F, 0x00]),
+            &mut od,
+            true,
+            128,
+        )
+        .expect("answer");
+        assert_eq!(r[8], 0x60, "download response");
+        assert_eq!(od.u16(0x6040, 0), 0x000F);
+        // Expedited without size: 4 bytes into a 2-byte object.
+        let r =
+            answer(&request(0x22, 0x6040, 0, &[1, 0, 0, 0]), &mut od, true, 128).expect("answer");
+        assert_eq!(r[8], 0x80, "abort");
+        assert_eq!(r[12..16], abort::LENGTH_MISMATCH.to_le_bytes());
+        // Normal upload: size indicated, complete size, data.
+        let r = answer(&request(0x40, 0x1008, 0, &[0; 4]), &mut od, true, 128).expect("answer");
+        assert_eq!(r[8], 0x41);
+        assert_eq!(r[12..16], 18u32.to_le_bytes());
+        assert_eq!(&r[16..34], b"a long device name");
+        // Complete access is refused; another protocol gets a mailbox error.
+        let r = answer(&request(0x50, 0x1008, 0, &[0; 4]), &mut od, true, 128).expect("answer");
+        assert_eq!(r[12..16], abort::UNSUPPORTED_ACCESS.to_le_bytes());
+        let mut foe = request(0x40, 0x1008, 0, &[0; 4]);
+        foe[5] = 0x04;
+        let r = answer(&foe, &mut od, true, 128).expect("answer");
+        assert_eq!(r[5] & 0x0F, MBX_TYPE_ERR);
+        // A length beyond the mailbox is an error reply, not a panic.
+        let mut long = request(0x40, 0x1008, 0, &[0; 4]);
+        long[0] = 0xFF;
+        assert_eq!(
+            answer(&long, &mut od, true, 128).expect("answer")[5] & 0x0F,
+            MBX_TYPE_ERR
+        );
+    }
+}

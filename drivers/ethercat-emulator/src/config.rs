@@ -13,7 +13,7 @@ pub const SEED_PRODUCT_CODE: u32 = 0x0003_0924;
 /// A configuration value out of range or a file that cannot be read; `key` names the
 /// value as in the TOML file (`drive[2].gear_ratio`).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{origin}: {key}: {message}")]
+#[error("{origin}: {}{message}", if key == "-" { String::new() } else { format!("{key}: ") })]
 pub struct ConfigError {
     /// The file (or `"<built-in>"`).
     pub origin: String,
@@ -387,6 +387,16 @@ mod tests {
         assert_eq!(c.drives[0].identity.vendor_id, 0x42);
         assert_eq!(c.drives[1].gear_ratio, 10.0);
         assert_eq!(c.time, TimeMode::PerExchange { cycle_s: 0.002 });
+    }
+
+    #[test]
+    fn the_example_file_is_the_seed_arm_on_the_wall_clock() {
+        let c =
+            ChainConfig::from_toml_str(include_str!("../example.chain.toml"), "example.chain.toml")
+                .expect("valid example");
+        let mut seed = ChainConfig::seed_arm();
+        seed.time = TimeMode::WallClock { max_step_s: 0.01 };
+        assert_eq!(c, seed);
     }
 
     #[test]

@@ -77,7 +77,7 @@ pub struct Counters {
     pub malformed: u64,
     /// Frames dropped by an injected fault (lost frames, link down).
     pub dropped_by_fault: u64,
-    /// Frames that were not EtherCAT, or were our own replies.
+    /// Frames that were not EtherCAT.
     pub ignored: u64,
     /// Process data exchanges (frames with a logical datagram that reached a drive).
     pub exchanges: u64,
@@ -242,7 +242,8 @@ impl Emulator {
     }
 
     /// Processes one Ethernet frame as the chain would: `None` if it is not answered
-    /// (not EtherCAT, our own reply, malformed, lost, link down).
+    /// (not EtherCAT, malformed, lost, link down). Like a first SubDevice it answers
+    /// whatever the source MAC; the transport must not feed it its own replies.
     pub fn handle_frame(&self, frame: &[u8]) -> Option<Reply> {
         self.lock().handle_frame(frame)
     }
@@ -377,11 +378,6 @@ impl Chain {
 
     fn handle_frame(&mut self, frame: &[u8]) -> Option<Reply> {
         if frame.len() < 14 || u16::from_be_bytes([frame[12], frame[13]]) != ETHERCAT_ETHERTYPE {
-            self.counters.ignored += 1;
-            return None;
-        }
-        if frame[6] & 0x02 != 0 {
-            // Source MAC locally administered: a frame already processed (ours).
             self.counters.ignored += 1;
             return None;
         }

@@ -14,6 +14,34 @@
 //! - [`plant`]: the [`Plant`] trait and the two plants.
 //!
 //! See the crate README for what is emulated and what is not.
+//!
+//! ```
+//! use std::time::Duration;
+//!
+//! use ethercrab::{MainDevice, MainDeviceConfig, PduStorage, Timeouts, std::ethercat_now};
+//! use microrobot_ethercat_emulator::{ChainConfig, Emulator, Fault, InProcessLink, MODE_CST};
+//!
+//! static PDU_STORAGE: PduStorage<16, { PduStorage::element_size(1100) }> = PduStorage::new();
+//! let (tx, rx, pdu_loop) = PDU_STORAGE.try_split().expect("split once");
+//! let emulator = Emulator::new(&ChainConfig::inertia_chain(2))?;
+//! let _link = InProcessLink::spawn(emulator.clone(), tx, rx)?; // answers until dropped
+//! // On a loaded test machine one round trip can exceed ethercrab's 10 ms EEPROM wait.
+//! let timeouts = Timeouts { eeprom: Duration::from_millis(100), ..Timeouts::default() };
+//! let md = MainDevice::new(pdu_loop, timeouts, MainDeviceConfig::default());
+//! async_io::block_on(async {
+//!     let group = md.init_single_group::<8, 64>(ethercat_now).await?;
+//!     for sd in group.iter(&md) {
+//!         sd.sdo_write(0x6060, 0, MODE_CST).await?; // cyclic synchronous torque
+//!     }
+//!     let group = group.into_op(&md).await?;
+//!     assert_eq!(group.tx_rx(&md).await?.working_counter, 6); // 3 per drive
+//!     Ok::<(), ethercrab::error::Error>(())
+//! })?;
+//! emulator.inject(Fault::DriveFault { drive: 1, error_code: 0x2310 })?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+#![warn(missing_docs)]
 
 pub mod config;
 pub mod fault;

@@ -142,9 +142,11 @@ impl RawSocket {
     }
 }
 
-/// Answers frames on `socket` until `stop` is set (checked every 50 ms). Frames whose
-/// source MAC has the locally administered bit set (replies, ours or another chain's)
-/// are ignored, as are malformed ones (counted in [`Emulator::counters`]).
+/// Answers frames on `socket` until `stop` is set (checked every 50 ms). The socket's
+/// own outgoing frames (its replies) are skipped by [`RawSocket::recv`]; malformed
+/// frames are dropped and counted in [`Emulator::counters`]. Frames are answered
+/// whatever their source MAC, as a first SubDevice does (a master using its NIC's
+/// locally administered veth address works too).
 pub fn serve(emulator: &Emulator, socket: &RawSocket, stop: &AtomicBool) -> io::Result<()> {
     let mut buf = vec![0u8; 2048];
     let mut late = LateFrames::default();

@@ -140,7 +140,11 @@ fn master_and_emulator_over_a_veth_pair_in_a_private_netns() {
     let (tx, rx, pdu_loop) = storage.try_split().expect("split");
     let md = MainDevice::new(
         pdu_loop,
-        Timeouts::default(),
+        Timeouts {
+            pdu: Duration::from_millis(100),
+            eeprom: Duration::from_millis(100),
+            ..Timeouts::default()
+        },
         MainDeviceConfig {
             dc_static_sync_iterations: 100,
             ..Default::default()

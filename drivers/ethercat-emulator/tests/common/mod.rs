@@ -3,6 +3,8 @@
 
 #![allow(dead_code)]
 
+use std::time::Duration;
+
 use ethercrab::subdevice_group::Op;
 use ethercrab::{
     DefaultLock, MainDevice, MainDeviceConfig, PduStorage, SubDeviceGroup, Timeouts, TxRxResponse,
@@ -12,6 +14,11 @@ use microrobot_ethercat_cia402::cia402::{Axis, Statusword, Step};
 use microrobot_ethercat_emulator::{ChainConfig, Emulator, InProcessLink};
 
 pub const MAX_SUBDEVICES: usize = 8;
+/// PDU (and EEPROM busy-wait) timeout of the tests' MainDevice: long enough for a
+/// loaded 2-core machine running the tests in parallel (ethercrab's 10 ms EEPROM
+/// default is one round trip there), short enough that the lost and late frame checks
+/// take a fraction of a second.
+pub const PDU_TIMEOUT: Duration = Duration::from_millis(100);
 pub const PDI_LEN: usize = 256;
 const MAX_FRAMES: usize = 16;
 const MAX_PDU_DATA: usize = PduStorage::element_size(1100);
@@ -37,7 +44,11 @@ pub fn bus(config: &ChainConfig) -> Bus {
     let link = InProcessLink::spawn(emulator.clone(), tx, rx).expect("link thread");
     let maindevice = MainDevice::new(
         pdu_loop,
-        Timeouts::default(),
+        Timeouts {
+            pdu: PDU_TIMEOUT,
+            eeprom: PDU_TIMEOUT,
+            ..Timeouts::default()
+        },
         MainDeviceConfig {
             dc_static_sync_iterations: 100,
             ..Default::default()
