@@ -16,6 +16,7 @@
 //!
 //! - [`master`]: the bus brought up from the drive file (identities checked first, SDO
 //!   configuration, watchdog, distributed clocks, OP) and the bounded cyclic exchange.
+//! - [`raw_socket`]: the AF_PACKET transport of the binary.
 //! - [`backend`]: the pipeline's actuator backend over it; the binary
 //!   `microrobot-ethercat-cia402` hands it to the driver SDK.
 
@@ -24,4 +25,5 @@ pub mod cia402;
 pub mod drive_file;
 pub mod master;
 pub mod pdo;
+pub mod raw_socket;
 pub mod scaling;

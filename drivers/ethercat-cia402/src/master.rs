@@ -319,25 +319,17 @@ impl Transport {
     }
 
     /// A MainDevice on a raw socket (AF_PACKET) on `interface`, its frames carried by
-    /// ethercrab's `tx_rx_task` on a thread of its own.
+    /// [`crate::raw_socket::RawSocketLink`] (a late frame is dropped, not fatal).
     pub fn raw_socket(interface: &str) -> Result<Transport, BringUpError> {
         let (tx, rx, pdu_loop) = pdu_loop()?;
-        let task = ethercrab::std::tx_rx_task(interface, tx, rx).map_err(|source| {
-            BringUpError::Socket {
-                interface: interface.to_string(),
-                source,
-            }
-        })?;
-        let thread = thread::Builder::new()
-            .name("ethercat-tx-rx".into())
-            .spawn(move || {
-                let _ = async_io::block_on(task);
-            })
-            .map_err(|source| BringUpError::Socket {
-                interface: interface.to_string(),
-                source,
+        let link =
+            crate::raw_socket::RawSocketLink::spawn(interface, tx, rx).map_err(|source| {
+                BringUpError::Socket {
+                    interface: interface.to_string(),
+                    source,
+                }
             })?;
-        Ok(Transport::new(pdu_loop, thread))
+        Ok(Transport::new(pdu_loop, link))
     }
 }
 
