@@ -277,11 +277,14 @@ impl LostCycles {
     }
 }
 
-/// The ethercrab timeouts used for bring-up (the cyclic exchange has its own deadline).
+/// The ethercrab timeouts used for bring-up (the cyclic exchange has its own deadline):
+/// a frame or an EEPROM access may take 100 ms, so that a scheduling hiccup of the
+/// host does not fail a bring-up.
 pub fn timeouts() -> Timeouts {
     Timeouts {
         state_transition: Duration::from_secs(5),
-        pdu: Duration::from_millis(30),
+        pdu: Duration::from_millis(100),
+        eeprom: Duration::from_millis(100),
         ..Timeouts::default()
     }
 }
