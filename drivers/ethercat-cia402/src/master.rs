@@ -310,6 +310,40 @@ pub fn pdu_loop() -> Result<(PduTx<'static>, PduRx<'static>, PduLoop<'static>), 
 pub struct Transport {
     maindevice: MainDevice<'static>,
     _link: Box<dyn Any + Send>,
+    frame_guard: Option<Arc<FrameGuard>>,
+}
+
+/// Mutual exclusion between a transport handing a frame to ethercrab's PDU loop (claim
+/// and send, or receive) and the master giving up on that frame at its deadline.
+/// ethercrab marks a frame sent (or received) without checking that the waiting future
+/// still exists; a future dropped in between leaks the frame slot for good. The
+/// transport holds the guard around each hand-over, the master around the drop only,
+/// so it is contended only at a missed deadline.
+#[derive(Debug, Default)]
+pub struct FrameGuard(std::sync::atomic::AtomicBool);
+
+impl FrameGuard {
+    /// Runs `f` holding the guard (spins a little, then yields, while the other side
+    /// holds it: the holder may be preempted on a busy core).
+    pub fn hold<T>(&self, f: impl FnOnce() -> T) -> T {
+        use std::sync::atomic::Ordering;
+        let mut spins = 0u32;
+        while self
+            .0
+            .compare_exchange_weak(false, true, Ordering::Acquire, Ordering::Relaxed)
+            .is_err()
+        {
+            spins += 1;
+            if spins < 64 {
+                std::hint::spin_loop();
+            } else {
+                thread::yield_now();
+            }
+        }
+        let r = f();
+        self.0.store(false, Ordering::Release);
+        r
+    }
 }
 
 impl Transport {
@@ -318,6 +352,19 @@ impl Transport {
         Transport {
             maindevice: MainDevice::new(pdu_loop, timeouts(), maindevice_config()),
             _link: Box::new(link),
+            frame_guard: None,
+        }
+    }
+
+    /// The same, with the transport holding `guard` around every frame hand-over.
+    pub fn with_frame_guard(
+        pdu_loop: PduLoop<'static>,
+        link: impl Any + Send,
+        guard: Arc<FrameGuard>,
+    ) -> Transport {
+        Transport {
+            frame_guard: Some(guard),
+            ..Transport::new(pdu_loop, link)
         }
     }
 
@@ -325,14 +372,13 @@ impl Transport {
     /// [`crate::raw_socket::RawSocketLink`] (a late frame is dropped, not fatal).
     pub fn raw_socket(interface: &str) -> Result<Transport, BringUpError> {
         let (tx, rx, pdu_loop) = pdu_loop()?;
-        let link =
-            crate::raw_socket::RawSocketLink::spawn(interface, tx, rx).map_err(|source| {
-                BringUpError::Socket {
-                    interface: interface.to_string(),
-                    source,
-                }
-            })?;
-        Ok(Transport::new(pdu_loop, link))
+        let guard = Arc::new(FrameGuard::default());
+        let link = crate::raw_socket::RawSocketLink::spawn(interface, tx, rx, Arc::clone(&guard))
+            .map_err(|source| BringUpError::Socket {
+            interface: interface.to_string(),
+            source,
+        })?;
+        Ok(Transport::with_frame_guard(pdu_loop, link, guard))
     }
 }
 
@@ -349,16 +395,28 @@ impl Wake for ThreadWaker {
 }
 
 /// Polls `fut` on this thread until it completes or `deadline` passes (`None`; the
-/// future is dropped, which releases its frame).
-fn poll_until<F: Future>(fut: F, deadline: Instant, waker: &Waker) -> Option<F::Output> {
-    let mut fut = pin!(fut);
+/// future is dropped, which releases its frame, under `guard` if the transport has one).
+fn poll_until<F: Future>(
+    fut: F,
+    deadline: Instant,
+    waker: &Waker,
+    guard: Option<&FrameGuard>,
+) -> Option<F::Output> {
+    // On the stack, dropped in place (`set(None)`) when the deadline passes.
+    let mut fut = pin!(Some(fut));
     let mut cx = Context::from_waker(waker);
     loop {
-        if let Poll::Ready(v) = fut.as_mut().poll(&mut cx) {
+        if let Some(f) = fut.as_mut().as_pin_mut()
+            && let Poll::Ready(v) = f.poll(&mut cx)
+        {
             return Some(v);
         }
         let now = Instant::now();
         if now >= deadline {
+            match guard {
+                Some(g) => g.hold(|| fut.set(None)),
+                None => fut.set(None),
+            }
             return None;
         }
         thread::park_timeout(deadline - now);
@@ -615,13 +673,13 @@ impl Bus {
         let waker = self.waker();
         let deadline = Instant::now() + self.exchange_timeout;
         let md = &self.transport.maindevice;
+        let guard = self.transport.frame_guard.as_deref();
         let resp = match &self.group {
             Some(OpGroup::Free(g)) => {
-                poll_until(g.tx_rx(md), deadline, &waker).map(|r| r.map(|r| summarize(&r)))
+                poll_until(g.tx_rx(md), deadline, &waker, guard).map(|r| r.map(|r| summarize(&r)))
             }
-            Some(OpGroup::Dc(g)) => {
-                poll_until(g.tx_rx_dc(md), deadline, &waker).map(|r| r.map(|r| summarize(&r)))
-            }
+            Some(OpGroup::Dc(g)) => poll_until(g.tx_rx_dc(md), deadline, &waker, guard)
+                .map(|r| r.map(|r| summarize(&r))),
             None => return Err(CycleError::Bus),
         };
         let resp = match resp {
@@ -647,15 +705,14 @@ impl Bus {
 
     fn al_status_code(&self, position: usize, deadline: Instant, waker: &Waker) -> u16 {
         let md = &self.transport.maindevice;
+        let guard = self.transport.frame_guard.as_deref();
         let status = match &self.group {
-            Some(OpGroup::Free(g)) => g
-                .subdevice(md, position)
-                .ok()
-                .and_then(|sd| poll_until(async move { sd.status().await }, deadline, waker)),
-            Some(OpGroup::Dc(g)) => g
-                .subdevice(md, position)
-                .ok()
-                .and_then(|sd| poll_until(async move { sd.status().await }, deadline, waker)),
+            Some(OpGroup::Free(g)) => g.subdevice(md, position).ok().and_then(|sd| {
+                poll_until(async move { sd.status().await }, deadline, waker, guard)
+            }),
+            Some(OpGroup::Dc(g)) => g.subdevice(md, position).ok().and_then(|sd| {
+                poll_until(async move { sd.status().await }, deadline, waker, guard)
+            }),
             None => None,
         };
         match status {

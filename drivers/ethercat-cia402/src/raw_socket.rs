@@ -18,6 +18,8 @@ use std::time::Duration;
 
 use ethercrab::{PduRx, PduTx};
 
+use crate::master::FrameGuard;
+
 /// The EtherCAT EtherType (ETG.1000.4 5.2).
 const ETHERCAT_ETHERTYPE: u16 = 0x88A4;
 /// How often the threads look at the stop flag.
@@ -181,6 +183,7 @@ impl RawSocketLink {
         interface: &str,
         mut tx: PduTx<'static>,
         mut rx: PduRx<'static>,
+        guard: Arc<FrameGuard>,
     ) -> io::Result<RawSocketLink> {
         let socket = RawSocket::bind(interface)?;
         let wake = Arc::new(EventFdWaker::new()?);
@@ -194,15 +197,22 @@ impl RawSocketLink {
                 let ms = POLL.as_millis() as i32;
                 while !st.load(Ordering::Acquire) && !tx.should_exit() {
                     tx.replace_waker(&waker);
-                    while let Some(frame) = tx.next_sendable_frame() {
-                        // A frame that cannot be sent times out in the master: a lost
-                        // cycle.
-                        let _ = frame.send_blocking(|bytes| {
-                            socket
-                                .send(bytes)
-                                .map_err(|_| ethercrab::error::Error::SendFrame)
-                        });
-                    }
+                    // Claim and send under the guard: the master does not drop a
+                    // frame's future between the two.
+                    while guard
+                        .hold(|| {
+                            tx.next_sendable_frame().map(|frame| {
+                                // A frame that cannot be sent times out in the master: a
+                                // lost cycle.
+                                let _ = frame.send_blocking(|bytes| {
+                                    socket
+                                        .send(bytes)
+                                        .map_err(|_| ethercrab::error::Error::SendFrame)
+                                });
+                            })
+                        })
+                        .is_some()
+                    {}
                     let mut pfd = [
                         libc::pollfd {
                             fd: socket.fd.as_raw_fd(),
@@ -228,7 +238,7 @@ impl RawSocketLink {
                             Ok(Some(0)) => {}
                             Ok(Some(n)) => {
                                 // A frame nobody waits for any more (late) is dropped.
-                                let _ = rx.receive_frame(&buf[..n]);
+                                let _ = guard.hold(|| rx.receive_frame(&buf[..n]));
                             }
                             Ok(None) => break,
                             Err(_) => {

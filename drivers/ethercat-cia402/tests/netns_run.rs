@@ -233,6 +233,7 @@ fn microrobot_run_table4_on_the_emulated_seed_arm_over_a_veth_pair() {
     );
     assert!(peak.iter().any(|t| *t > 0.0), "torque applied: {peak:?}");
     // The drives quantise torque to 1 per mille of rated (0.127 N·m on joints 1-3 and
-    // 0.032 N·m on 4-6, joint side) and the pipeline runs at 250 Hz here.
-    assert!(err.iter().all(|e| *e < 0.01), "tracking error {err:?} rad");
+    // 0.032 N·m on 4-6, joint side), the pipeline runs at 250 Hz here, and an exchange
+    // lost on the loaded machine holds the last measured state for a cycle.
+    assert!(err.iter().all(|e| *e < 0.05), "tracking error {err:?} rad");
 }
