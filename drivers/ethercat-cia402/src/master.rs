@@ -317,8 +317,9 @@ pub struct Transport {
 /// and send, or receive) and the master giving up on that frame at its deadline.
 /// ethercrab marks a frame sent (or received) without checking that the waiting future
 /// still exists; a future dropped in between leaks the frame slot for good. The
-/// transport holds the guard around each hand-over, the master around the drop only,
-/// so it is contended only at a missed deadline.
+/// transport holds the guard around each hand-over (a copy of the frame and a state
+/// change, no syscall), the master around the drop only, so it is contended only at a
+/// missed deadline, and then briefly.
 #[derive(Debug, Default)]
 pub struct FrameGuard(std::sync::atomic::AtomicBool);
 

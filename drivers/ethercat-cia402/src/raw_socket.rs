@@ -194,25 +194,35 @@ impl RawSocketLink {
             .spawn(move || {
                 let waker = Waker::from(Arc::clone(&wake));
                 let mut buf = [0u8; 2048];
+                let mut txbuf = [0u8; 2048];
                 let ms = POLL.as_millis() as i32;
                 while !st.load(Ordering::Acquire) && !tx.should_exit() {
                     tx.replace_waker(&waker);
-                    // Claim and send under the guard: the master does not drop a
-                    // frame's future between the two.
-                    while guard
-                        .hold(|| {
+                    // Claim the frame and copy it out under the guard (ethercrab marks it
+                    // sent there: no answer can come before the copy is on the wire), then
+                    // send it outside: the guard is held for a copy, never for a syscall.
+                    loop {
+                        let len = guard.hold(|| {
                             tx.next_sendable_frame().map(|frame| {
-                                // A frame that cannot be sent times out in the master: a
-                                // lost cycle.
-                                let _ = frame.send_blocking(|bytes| {
-                                    socket
-                                        .send(bytes)
-                                        .map_err(|_| ethercrab::error::Error::SendFrame)
-                                });
+                                frame.send_blocking(|bytes| {
+                                    let out = txbuf
+                                        .get_mut(..bytes.len())
+                                        .ok_or(ethercrab::error::Error::SendFrame)?;
+                                    out.copy_from_slice(bytes);
+                                    Ok(bytes.len())
+                                })
                             })
-                        })
-                        .is_some()
-                    {}
+                        });
+                        match len {
+                            // A frame that cannot be sent times out in the master: a
+                            // lost cycle.
+                            Some(Ok(n)) => {
+                                let _ = socket.send(&txbuf[..n]);
+                            }
+                            Some(Err(_)) => {}
+                            None => break,
+                        }
+                    }
                     let mut pfd = [
                         libc::pollfd {
                             fd: socket.fd.as_raw_fd(),
