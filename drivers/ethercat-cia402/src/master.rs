@@ -324,8 +324,9 @@ pub struct Transport {
 pub struct FrameGuard(std::sync::atomic::AtomicBool);
 
 impl FrameGuard {
-    /// Runs `f` holding the guard (spins a little, then yields, while the other side
-    /// holds it: the holder may be preempted on a busy core).
+    /// Runs `f` holding the guard. While the other side holds it: spins a little, then
+    /// sleeps in 20 µs steps — the holder may be preempted, and a yield from a
+    /// SCHED_FIFO cycle thread would never let a normal-priority holder run.
     pub fn hold<T>(&self, f: impl FnOnce() -> T) -> T {
         use std::sync::atomic::Ordering;
         let mut spins = 0u32;
@@ -338,7 +339,7 @@ impl FrameGuard {
             if spins < 64 {
                 std::hint::spin_loop();
             } else {
-                thread::yield_now();
+                thread::sleep(Duration::from_micros(20));
             }
         }
         let r = f();
