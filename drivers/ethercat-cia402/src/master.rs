@@ -846,6 +846,30 @@ mod tests {
     }
 
     #[test]
+    fn an_exchange_is_bounded_by_its_deadline_and_dropped_under_the_guard() {
+        let waker = Waker::from(Arc::new(ThreadWaker(thread::current())));
+        let guard = FrameGuard::default();
+        let t0 = Instant::now();
+        let r = poll_until(
+            std::future::pending::<()>(),
+            t0 + Duration::from_millis(5),
+            &waker,
+            Some(&guard),
+        );
+        assert_eq!(r, None);
+        let dt = t0.elapsed();
+        assert!(dt >= Duration::from_millis(5), "{dt:?}");
+        assert_eq!(
+            poll_until(async { 7 }, Instant::now(), &waker, None),
+            Some(7)
+        );
+        // The guard is free again and excludes the other side while held.
+        let held = guard.hold(|| guard.0.load(std::sync::atomic::Ordering::Relaxed));
+        assert!(held);
+        assert!(!guard.0.load(std::sync::atomic::Ordering::Relaxed));
+    }
+
+    #[test]
     fn rated_torque_tolerance() {
         assert!(rated_torque_matches(1270, 1.27));
         assert!(rated_torque_matches(1271, 1.27));
