@@ -1,0 +1,276 @@
+//! The raw-socket transport (Linux): ethercrab's PDU loop halves carried over an
+//! AF_PACKET socket bound to the bus interface (EtherType 0x88A4, ETG.1000.4 5.2), by
+//! one thread: it sends the frames ethercrab queues (its waker writes an eventfd the
+//! thread polls beside the socket) and hands every received frame to ethercrab. One
+//! thread, so a frame is marked sent before its answer can be taken in.
+//!
+//! ethercrab's own `tx_rx_task` ends at the first frame it cannot match (the late
+//! answer to an exchange the master gave up on), and with it the bus. Here such a frame
+//! is dropped and the loop goes on: a late frame costs one lost cycle, as it should.
+
+use std::io;
+use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::task::{Wake, Waker};
+use std::thread::{self, JoinHandle};
+use std::time::Duration;
+
+use ethercrab::{PduRx, PduTx};
+
+use crate::master::FrameGuard;
+
+/// The EtherCAT EtherType (ETG.1000.4 5.2).
+const ETHERCAT_ETHERTYPE: u16 = 0x88A4;
+/// How often the threads look at the stop flag.
+const POLL: Duration = Duration::from_millis(10);
+
+/// An AF_PACKET raw socket for EtherCAT frames on one interface.
+#[derive(Debug)]
+struct RawSocket {
+    fd: OwnedFd,
+    ifindex: i32,
+}
+
+impl RawSocket {
+    /// Opens the socket on `interface` (needs CAP_NET_RAW).
+    fn bind(interface: &str) -> io::Result<RawSocket> {
+        let name = std::ffi::CString::new(interface)
+            .map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "interface name has a NUL"))?;
+        // SAFETY: a valid C string, alive for the call.
+        let ifindex = unsafe { libc::if_nametoindex(name.as_ptr()) };
+        if ifindex == 0 {
+            return Err(io::Error::new(
+                io::ErrorKind::NotFound,
+                format!("no network interface \"{interface}\""),
+            ));
+        }
+        let proto = ETHERCAT_ETHERTYPE.to_be();
+        // SAFETY: socket(2) with constant arguments; the result is checked.
+        let raw = unsafe { libc::socket(libc::AF_PACKET, libc::SOCK_RAW, i32::from(proto)) };
+        if raw < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        // SAFETY: `raw` is a fresh descriptor owned by nothing else.
+        let fd = unsafe { OwnedFd::from_raw_fd(raw) };
+        // SAFETY: an all-zero sockaddr_ll is valid; the fields used are set below.
+        let mut addr: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
+        addr.sll_family = libc::AF_PACKET as u16;
+        addr.sll_protocol = proto;
+        addr.sll_ifindex = ifindex as i32;
+        // SAFETY: pointer and length describe `addr`.
+        let r = unsafe {
+            libc::bind(
+                fd.as_raw_fd(),
+                (&addr as *const libc::sockaddr_ll).cast(),
+                std::mem::size_of::<libc::sockaddr_ll>() as u32,
+            )
+        };
+        if r < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        Ok(RawSocket {
+            fd,
+            ifindex: ifindex as i32,
+        })
+    }
+
+    /// A frame from the wire if one is queued (frames this host sent are skipped as
+    /// `Ok(Some(0))`); `Ok(None)` when none is.
+    fn try_recv(&self, buf: &mut [u8]) -> io::Result<Option<usize>> {
+        // SAFETY: an all-zero sockaddr_ll is valid; recvfrom fills it.
+        let mut from: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
+        let mut from_len = std::mem::size_of::<libc::sockaddr_ll>() as u32;
+        // SAFETY: buffer and address pointers with their lengths.
+        let n = unsafe {
+            libc::recvfrom(
+                self.fd.as_raw_fd(),
+                buf.as_mut_ptr().cast(),
+                buf.len(),
+                libc::MSG_DONTWAIT,
+                (&mut from as *mut libc::sockaddr_ll).cast(),
+                &mut from_len,
+            )
+        };
+        if n < 0 {
+            let e = io::Error::last_os_error();
+            return if matches!(
+                e.kind(),
+                io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+            ) {
+                Ok(None)
+            } else {
+                Err(e)
+            };
+        }
+        if from.sll_pkttype == libc::PACKET_OUTGOING {
+            return Ok(Some(0));
+        }
+        Ok(Some(n as usize))
+    }
+
+    /// Sends one complete Ethernet frame.
+    fn send(&self, frame: &[u8]) -> io::Result<usize> {
+        // SAFETY: an all-zero sockaddr_ll is valid; the fields used are set below.
+        let mut to: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
+        to.sll_family = libc::AF_PACKET as u16;
+        to.sll_protocol = ETHERCAT_ETHERTYPE.to_be();
+        to.sll_ifindex = self.ifindex;
+        to.sll_halen = 6;
+        if let Some(dst) = frame.get(..6) {
+            to.sll_addr[..6].copy_from_slice(dst);
+        }
+        // SAFETY: buffer and address pointers with their lengths.
+        let n = unsafe {
+            libc::sendto(
+                self.fd.as_raw_fd(),
+                frame.as_ptr().cast(),
+                frame.len(),
+                0,
+                (&to as *const libc::sockaddr_ll).cast(),
+                std::mem::size_of::<libc::sockaddr_ll>() as u32,
+            )
+        };
+        if n < 0 {
+            Err(io::Error::last_os_error())
+        } else {
+            Ok(n as usize)
+        }
+    }
+}
+
+/// Wakes the link thread out of poll(2) by writing its eventfd.
+struct EventFdWaker(OwnedFd);
+
+impl EventFdWaker {
+    fn new() -> io::Result<EventFdWaker> {
+        // SAFETY: eventfd(2) with constant arguments; the result is checked.
+        let fd = unsafe { libc::eventfd(0, libc::EFD_NONBLOCK | libc::EFD_CLOEXEC) };
+        if fd < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        // SAFETY: a fresh descriptor owned by nothing else.
+        Ok(EventFdWaker(unsafe { OwnedFd::from_raw_fd(fd) }))
+    }
+
+    fn clear(&self) {
+        let mut v = 0u64;
+        // SAFETY: reads 8 bytes into `v`; non-blocking, a failure leaves it set.
+        let _ = unsafe { libc::read(self.0.as_raw_fd(), (&mut v as *mut u64).cast(), 8) };
+    }
+}
+
+impl Wake for EventFdWaker {
+    fn wake(self: Arc<Self>) {
+        self.wake_by_ref();
+    }
+    fn wake_by_ref(self: &Arc<Self>) {
+        let one = 1u64;
+        // SAFETY: writes 8 bytes from `one`; non-blocking (a full counter is still set).
+        let _ = unsafe { libc::write(self.0.as_raw_fd(), (&one as *const u64).cast(), 8) };
+    }
+}
+
+/// The running transport; dropping it stops its thread (within [`POLL`]).
+pub struct RawSocketLink {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl RawSocketLink {
+    /// Opens `interface` and starts carrying the frames of `tx` and `rx`.
+    pub fn spawn(
+        interface: &str,
+        mut tx: PduTx<'static>,
+        mut rx: PduRx<'static>,
+        guard: Arc<FrameGuard>,
+    ) -> io::Result<RawSocketLink> {
+        let socket = RawSocket::bind(interface)?;
+        let wake = Arc::new(EventFdWaker::new()?);
+        let stop = Arc::new(AtomicBool::new(false));
+        let st = Arc::clone(&stop);
+        let thread = thread::Builder::new()
+            .name("ethercat-tx-rx".into())
+            .spawn(move || {
+                let waker = Waker::from(Arc::clone(&wake));
+                let mut buf = [0u8; 2048];
+                let mut txbuf = [0u8; 2048];
+                let ms = POLL.as_millis() as i32;
+                while !st.load(Ordering::Acquire) && !tx.should_exit() {
+                    tx.replace_waker(&waker);
+                    // Claim the frame and copy it out under the guard (ethercrab marks it
+                    // sent there: no answer can come before the copy is on the wire), then
+                    // send it outside: the guard is held for a copy, never for a syscall.
+                    loop {
+                        let len = guard.hold(|| {
+                            tx.next_sendable_frame().map(|frame| {
+                                frame.send_blocking(|bytes| {
+                                    let out = txbuf
+                                        .get_mut(..bytes.len())
+                                        .ok_or(ethercrab::error::Error::SendFrame)?;
+                                    out.copy_from_slice(bytes);
+                                    Ok(bytes.len())
+                                })
+                            })
+                        });
+                        match len {
+                            // A frame that cannot be sent times out in the master: a
+                            // lost cycle.
+                            Some(Ok(n)) => {
+                                let _ = socket.send(&txbuf[..n]);
+                            }
+                            Some(Err(_)) => {}
+                            None => break,
+                        }
+                    }
+                    let mut pfd = [
+                        libc::pollfd {
+                            fd: socket.fd.as_raw_fd(),
+                            events: libc::POLLIN,
+                            revents: 0,
+                        },
+                        libc::pollfd {
+                            fd: wake.0.as_raw_fd(),
+                            events: libc::POLLIN,
+                            revents: 0,
+                        },
+                    ];
+                    // SAFETY: two valid pollfds.
+                    let r = unsafe { libc::poll(pfd.as_mut_ptr(), 2, ms) };
+                    if r <= 0 {
+                        continue;
+                    }
+                    if pfd[1].revents != 0 {
+                        wake.clear();
+                    }
+                    loop {
+                        match socket.try_recv(&mut buf) {
+                            Ok(Some(0)) => {}
+                            Ok(Some(n)) => {
+                                // A frame nobody waits for any more (late) is dropped.
+                                let _ = guard.hold(|| rx.receive_frame(&buf[..n]));
+                            }
+                            Ok(None) => break,
+                            Err(_) => {
+                                thread::sleep(POLL);
+                                break;
+                            }
+                        }
+                    }
+                }
+            })?;
+        Ok(RawSocketLink {
+            stop,
+            thread: Some(thread),
+        })
+    }
+}
+
+impl Drop for RawSocketLink {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
