@@ -25,6 +25,46 @@ pub fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_microrobot")
 }
 
+/// The binary `name` of another workspace package (`package`), of this build.
+/// `cargo test --workspace` builds it with everything else; when it is older than any
+/// source it is built from (`Cargo.lock`, the manifests, `messages/`, `services/` and
+/// the package's own folders `dirs`: after an edit and a narrower `cargo test`), it is
+/// built here first, since a stale binary from before a contract change would fail to
+/// open the bus. (Building it unconditionally costs a second dependency tree: `cargo
+/// build -p` resolves other features than the workspace's tests.)
+pub fn workspace_binary(name: &str, package: &str, dirs: &[&str]) -> PathBuf {
+    let exe = Path::new(bin()).parent().expect("binary dir").join(name);
+    let built = std::fs::metadata(&exe).and_then(|m| m.modified()).ok();
+    let newest = ["Cargo.lock", "Cargo.toml", "messages", "services"]
+        .iter()
+        .chain(dirs)
+        .filter_map(|s| newest_mtime(&repo().join(s)))
+        .max();
+    if built.is_none() || newest > built {
+        let status = Command::new(env!("CARGO"))
+            .args(["build", "-p", package, "--bin", name])
+            .current_dir(repo())
+            .status()
+            .unwrap_or_else(|e| panic!("cargo build -p {package}: {e}"));
+        assert!(status.success(), "building {name} failed");
+    }
+    assert!(exe.exists(), "{} missing", exe.display());
+    exe
+}
+
+/// The newest modification time of a file or of any file below a folder.
+fn newest_mtime(path: &Path) -> Option<std::time::SystemTime> {
+    let meta = std::fs::metadata(path).ok()?;
+    if !meta.is_dir() {
+        return meta.modified().ok();
+    }
+    std::fs::read_dir(path)
+        .ok()?
+        .flatten()
+        .filter_map(|e| newest_mtime(&e.path()))
+        .max()
+}
+
 /// The simulated arm's service binary (`microrobot-actuator`) of the same build.
 pub fn actuator_bin() -> &'static str {
     env!("CARGO_BIN_EXE_microrobot-actuator")

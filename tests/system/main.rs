@@ -16,6 +16,7 @@ mod config_keys;
 mod driver_check;
 mod error_messages;
 mod estop;
+mod ethercat_netns;
 mod faults;
 mod hop_budget;
 mod inspect;

@@ -180,52 +180,13 @@ fn lockstep_runs_are_bit_identical() {
     );
 }
 
-/// The example driver binary of this build. `cargo test --workspace` builds it with
-/// everything else; when it is older than any source it is built from (a narrower `cargo
-/// test` after an edit), it is built here first: a stale binary from before a contract
-/// change would fail to open the bus. (Building it unconditionally costs a whole second
-/// dependency tree: `cargo build -p` resolves other features than the workspace's tests.)
+/// The example driver binary of this build.
 fn example_driver() -> PathBuf {
-    let exe = PathBuf::from(bin())
-        .parent()
-        .expect("binary dir")
-        .join("microrobot-example-driver");
-    let built = std::fs::metadata(&exe).and_then(|m| m.modified()).ok();
-    let sources = [
-        "Cargo.lock",
-        "Cargo.toml",
-        "messages",
-        "services",
-        "drivers/microrobot-driver",
-        "drivers/example-driver",
-    ];
-    let newest = sources
-        .iter()
-        .filter_map(|s| newest_mtime(&repo().join(s)))
-        .max();
-    if built.is_none() || newest > built {
-        let status = std::process::Command::new(env!("CARGO"))
-            .args(["build", "-p", "microrobot-example-driver"])
-            .current_dir(repo())
-            .status()
-            .expect("cargo build -p microrobot-example-driver");
-        assert!(status.success(), "building the example driver failed");
-    }
-    assert!(exe.exists(), "{} missing", exe.display());
-    exe
-}
-
-/// The newest modification time of a file or of any file below a folder.
-fn newest_mtime(path: &std::path::Path) -> Option<std::time::SystemTime> {
-    let meta = std::fs::metadata(path).ok()?;
-    if !meta.is_dir() {
-        return meta.modified().ok();
-    }
-    std::fs::read_dir(path)
-        .ok()?
-        .flatten()
-        .filter_map(|e| newest_mtime(&e.path()))
-        .max()
+    workspace_binary(
+        "microrobot-example-driver",
+        "microrobot-example-driver",
+        &["drivers/microrobot-driver", "drivers/example-driver"],
+    )
 }
 
 #[test]

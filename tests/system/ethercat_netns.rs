@@ -4,18 +4,18 @@
 //! Table 4 program must run to the end.
 //!
 //! Needs CAP_NET_ADMIN (namespace, veth) and CAP_NET_RAW (AF_PACKET). Without them the
-//! test prints why and passes, unless MICROROBOT_REQUIRE_NETNS=1, where it fails. It
-//! builds the `microrobot` binaries and the emulator binary first (a no-op when built).
+//! test prints why and passes, unless MICROROBOT_REQUIRE_NETNS=1, where it fails.
 //!
 //! By default it runs in lockstep at 250 Hz (bus cycle 4 ms, the emulator's time one
 //! cycle per exchange). With MICROROBOT_ECAT_FREE_RUN=1 it runs free at 1 kHz on the
 //! wall clock instead, as on hardware: a timing measurement for a quiet machine.
 
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::channel;
 use std::time::{Duration, Instant};
+
+use crate::common::*;
 
 const MASTER_IF: &str = "ecm0";
 const CHAIN_IF: &str = "ecm1";
@@ -51,21 +51,6 @@ fn ip(args: &[&str]) -> Result<(), String> {
     }
 }
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// `cargo build` of `args`; the binaries land beside this package's binary.
-fn build(args: &[&str]) {
-    let status = Command::new(env!("CARGO"))
-        .arg("build")
-        .args(args)
-        .current_dir(repo())
-        .status()
-        .expect("cargo build");
-    assert!(status.success(), "cargo build {} failed", args.join(" "));
-}
-
 struct Killed(Child);
 
 impl Drop for Killed {
@@ -99,15 +84,16 @@ fn microrobot_run_table4_on_the_emulated_seed_arm_over_a_veth_pair() {
         return;
     }
 
-    let driver = PathBuf::from(env!("CARGO_BIN_EXE_microrobot-ethercat-cia402"));
-    let bin_dir = driver.parent().expect("binary dir").to_path_buf();
-    build(&["-p", "microrobot", "--bins"]);
-    build(&[
-        "-p",
+    let driver = workspace_binary(
+        "microrobot-ethercat-cia402",
+        "microrobot-ethercat-cia402",
+        &["drivers/microrobot-driver", "drivers/ethercat-cia402"],
+    );
+    let emulator = workspace_binary(
         "microrobot-ethercat-emulator",
-        "--bin",
         "microrobot-ethercat-emulator",
-    ]);
+        &["drivers/ethercat-cia402", "drivers/ethercat-emulator"],
+    );
 
     let free_run = std::env::var("MICROROBOT_ECAT_FREE_RUN").as_deref() == Ok("1");
     let cycle_us = if free_run {
@@ -120,7 +106,7 @@ fn microrobot_run_table4_on_the_emulated_seed_arm_over_a_veth_pair() {
     if !free_run {
         emu_args.extend(["--cycle-s", &cycle_s]);
     }
-    let mut emu = Command::new(bin_dir.join("microrobot-ethercat-emulator"))
+    let mut emu = Command::new(&emulator)
         .args(&emu_args)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
@@ -143,7 +129,7 @@ fn microrobot_run_table4_on_the_emulated_seed_arm_over_a_veth_pair() {
 
     let dir = tempfile::tempdir().expect("tempdir");
     let drive_file = dir.path().join("seed.drive.toml");
-    let text = include_str!("../example.drive.toml")
+    let text = include_str!("../../drivers/ethercat-cia402/example.drive.toml")
         .replace("cycle_us = 1000", &format!("cycle_us = {cycle_us}"))
         // A shared, loaded test machine deschedules the emulator and the socket thread
         // for tens of ms at times: ride out 100 ms of lost exchanges (the drive file
@@ -176,7 +162,7 @@ fn microrobot_run_table4_on_the_emulated_seed_arm_over_a_veth_pair() {
 
     let summary = dir.path().join("summary.json");
     let start = Instant::now();
-    let mut run = Command::new(bin_dir.join("microrobot"))
+    let mut run = Command::new(bin())
         .args(["run", "--config"])
         .arg(&config)
         .args(["--quiet", "--summary-json"])
