@@ -33,3 +33,4 @@ mod teleop;
 mod trust_boundary;
 mod urdf_robot_run;
 mod verdicts;
+mod view;
