@@ -91,9 +91,7 @@ fn start_view(args: &[&str]) -> (Proc, String) {
 }
 
 fn finite(v: &Value) -> f64 {
-    let x = v
-        .as_f64()
-        .unwrap_or_else(|| panic!("not a number: {v}"));
+    let x = v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"));
     assert!(x.is_finite(), "{v}");
     x
 }
@@ -214,14 +212,20 @@ fn a_foxglove_client_sees_the_live_arm_and_a_stalled_one_costs_the_pipeline_noth
             compared += 1;
         }
     }
-    assert!(compared >= 5, "only {compared} tool frames matched a joints message");
+    assert!(
+        compared >= 5,
+        "only {compared} tool frames matched a joints message"
+    );
     for f in ["tool", "cmd/tool"] {
         assert!(frames.contains(f), "no frame {f}: {frames:?}");
     }
     let names = joints_at[0].1["name"].as_array().expect("names");
     assert_eq!(names.len(), 6);
     for n in names {
-        assert!(frames.contains(n.as_str().expect("name")), "{n}: {frames:?}");
+        assert!(
+            frames.contains(n.as_str().expect("name")),
+            "{n}: {frames:?}"
+        );
     }
 
     // A client that subscribes to everything and then stops reading for the rest of the

@@ -183,9 +183,8 @@ impl Feed {
     ) -> Vec<(usize, Value)> {
         use super::tap::Payload;
         let p = self.periods;
-        let due = |last: Option<u64>, period: u64| {
-            last.is_none_or(|t| stamp.saturating_sub(t) >= period)
-        };
+        let due =
+            |last: Option<u64>, period: u64| last.is_none_or(|t| stamp.saturating_sub(t) >= period);
         let wanted = match payload {
             Payload::State(_) => [
                 due(self.last[0], p.transforms_ns),

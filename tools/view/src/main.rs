@@ -21,7 +21,6 @@ use foxglove::{ChannelBuilder, PartialMetadata, RawChannel, Schema, WebSocketSer
 use microrobot_cli::recording::tap::{self, BusTap, Payload, Received};
 use microrobot_cli::recording::viewer::{self, Feed, Periods};
 use microrobot_cli::recording::{self as recording, logs};
-use microrobot_messages::monotonic_ns;
 use microrobot_runtime::Shutdown;
 
 /// Options of `microrobot view`.
@@ -84,7 +83,11 @@ fn channel(
 ) -> Result<Arc<RawChannel>> {
     ChannelBuilder::new(topic)
         .message_encoding("json")
-        .schema(Schema::new(name, "jsonschema", schema.to_string().into_bytes()))
+        .schema(Schema::new(
+            name,
+            "jsonschema",
+            schema.to_string().into_bytes(),
+        ))
         .context(ctx)
         .build_raw()
         .map_err(|e| anyhow!("cannot create the `{topic}` channel: {e}"))
@@ -146,7 +149,9 @@ fn serve(args: Args) -> Result<()> {
     let url = format!("ws://{}", SocketAddr::new(args.bind.ip(), server.port()));
     println!("serving {url} (instance `{}`)", args.instance);
     let _ = std::io::stdout().flush();
-    eprintln!("microrobot view: in Foxglove, Open connection > Foxglove WebSocket > {url}; Ctrl-C stops");
+    eprintln!(
+        "microrobot view: in Foxglove, Open connection > Foxglove WebSocket > {url}; Ctrl-C stops"
+    );
 
     let offset = tap::clock_offset_ns();
     let raw_period = period_ns(args.joints_hz);
