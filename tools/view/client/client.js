@@ -15,9 +15,12 @@ if (!url || !["collect", "stall"].includes(mode) || !(Number(seconds) > 0)) {
   console.error("usage: node client.js URL collect|stall SECONDS");
   process.exit(2);
 }
-const ws = new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL]);
+// Foxglove's Rust SDK names the ws-protocol v1 wire format (inline schemas in the
+// advertisements) `foxglove.sdk.v1`; the client speaks it as `foxglove.websocket.v1`.
+const ws = new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL, "foxglove.sdk.v1"]);
 const client = new FoxgloveClient({ ws });
-const KEEP = 40; // last messages kept per channel
+// Last messages kept per channel (more of the two the test matches by log time).
+const keep = (topic) => (topic === "transforms" || topic === "joints" ? 40 : 2);
 const channels = new Map(); // subscription id -> record
 const byTopic = {};
 let serverName = null;
@@ -36,6 +39,7 @@ client.on("advertise", (list) => {
       schemaEncoding: ch.schemaEncoding,
       encoding: ch.encoding,
       count: 0,
+      keep: keep(ch.topic),
       last: [],
     };
     byTopic[ch.topic] = rec;
@@ -58,12 +62,11 @@ client.on("message", ({ subscriptionId, timestamp, data }) => {
     value = { undecodable: String(e) };
   }
   rec.last.push({ log_time: timestamp.toString(), value });
-  if (rec.last.length > KEEP) rec.last.shift();
+  if (rec.last.length > rec.keep) rec.last.shift();
 });
 setTimeout(() => {
-  if (mode === "collect") {
-    console.log(JSON.stringify({ server: serverName, channels: byTopic }));
-  }
   ws.terminate();
-  process.exit(0);
+  const out = mode === "collect" ? JSON.stringify({ server: serverName, channels: byTopic }) : "";
+  // Exit once the line is written: a pipe takes it asynchronously.
+  process.stdout.write(out + "\n", () => process.exit(0));
 }, Number(seconds) * 1000);
