@@ -20,7 +20,7 @@ if (!url || !["collect", "stall"].includes(mode) || !(Number(seconds) > 0)) {
 const ws = new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL, "foxglove.sdk.v1"]);
 const client = new FoxgloveClient({ ws });
 // Last messages kept per channel (more of the two the test matches by log time).
-const keep = (topic) => (topic === "transforms" || topic === "joints" ? 40 : 2);
+const keep = (topic) => (topic === "transforms" || topic === "joints" ? 200 : 2);
 const channels = new Map(); // subscription id -> record
 const byTopic = {};
 let serverName = null;
