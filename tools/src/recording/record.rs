@@ -556,6 +556,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use microrobot_messages::{JointSetpoint, MotionCommand};
 
     fn setpoint(seq: u64) -> Payload {
         let mut m = JointSetpoint::default();
