@@ -137,7 +137,10 @@ fn a_foxglove_client_sees_the_live_arm_and_a_stalled_one_costs_the_pipeline_noth
     assert!(seen.status.success(), "client: {}", seen.stderr);
     let seen: Value = serde_json::from_str(seen.stdout.trim()).unwrap_or_else(|e| {
         let head: String = seen.stdout.chars().take(2000).collect();
-        panic!("client output ({} bytes) {head:?}...: {e}", seen.stdout.len())
+        panic!(
+            "client output ({} bytes) {head:?}...: {e}",
+            seen.stdout.len()
+        )
     });
     assert_eq!(seen["server"], format!("microrobot {inst}"));
     for (topic, schema) in [
