@@ -106,7 +106,7 @@ impl Siblings {
             format!(" {}", self.select.join(" "))
         };
         format!(
-            "{} run as binaries of the same build beside microrobot ({}): {} with \
+            "{} must come from the same build, beside microrobot ({}): {} with \
              `cargo build{profile}{select}` in the repository{}",
             self.what,
             dir.display(),
