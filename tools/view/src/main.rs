@@ -118,9 +118,10 @@ fn nice_process(inc: i32) {
 }
 
 fn serve(args: Args) -> Result<()> {
+    // iceoryx2's own notices (e.g. "no config file was loaded") only on request.
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     tap::check_instance(&args.instance)?;
     microrobot_cli::inspect::require_running(&args.instance)?;
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     nice_process(10);
     let shutdown = Shutdown::new().context("cannot create the shutdown eventfd")?;
     shutdown
