@@ -379,6 +379,50 @@ mod tests {
         Viewer::from_config_text(&text, "test").expect("viewer")
     }
 
+    /// Each derived channel keeps its own period, by the messages' stamps; setpoints give
+    /// their own transforms at the transforms' period; other streams give nothing.
+    #[test]
+    fn a_feed_decimates_each_channel_to_its_period() {
+        use super::super::tap::Payload;
+        let mut feed = Feed {
+            instance: "unit".into(),
+            periods: Periods {
+                transforms_ns: 10_000_000,
+                joints_ns: 5_000_000,
+                scene_ns: 20_000_000,
+            },
+            viewer: Some(viewer()),
+            looked_ns: None,
+            last: [None; 4],
+        };
+        let mut counts = [0usize; 3];
+        let mut setpoint_transforms = 0;
+        for ms in 0..40u64 {
+            let stamp = 1_000_000_000 + ms * 1_000_000;
+            let state = JointState {
+                dof: 6,
+                ..Default::default()
+            };
+            for (i, _) in feed.derive(&Payload::State(state), stamp, stamp) {
+                counts[i] += 1;
+            }
+            let setpoint = JointSetpoint {
+                dof: 6,
+                ..Default::default()
+            };
+            for (i, v) in feed.derive(&Payload::Setpoint(setpoint), stamp, stamp) {
+                assert_eq!(i, 0);
+                assert!(v.to_string().contains("cmd/tool"));
+                setpoint_transforms += 1;
+            }
+            let status = Payload::Status(Box::default());
+            assert!(feed.derive(&status, stamp, stamp).is_empty());
+        }
+        // 40 ms of 1 kHz states: transforms every 10 ms, joints every 5, scene every 20.
+        assert_eq!(counts, [4, 8, 2]);
+        assert_eq!(setpoint_transforms, 4);
+    }
+
     #[test]
     fn the_tool_transform_is_the_models_tool_pose() {
         let mut v = viewer();
