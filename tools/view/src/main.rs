@@ -147,6 +147,13 @@ fn serve(args: Args) -> Result<()> {
         .context(&ctx)
         .start_blocking()
         .map_err(|e| anyhow!("cannot serve on {}: {e}", args.bind))?;
+    if !args.bind.ip().is_loopback() {
+        eprintln!(
+            "microrobot view: warning: serving on {} (not loopback): whoever reaches it sees \
+             the arm's streams, with no authentication",
+            args.bind.ip()
+        );
+    }
     let url = format!("ws://{}", SocketAddr::new(args.bind.ip(), server.port()));
     println!("serving {url} (instance `{}`)", args.instance);
     let _ = std::io::stdout().flush();
