@@ -9,8 +9,8 @@ use core::mem::{align_of, offset_of, size_of, size_of_val};
 use iceoryx2::prelude::ZeroCopySend;
 
 use crate::{
-    CommandVerdict, Header, JointSetpoint, JointState, LatencySummary, MasterPose, MotionCommand,
-    ServiceStatus, TorqueCommand,
+    CommandVerdict, Header, HopLatency, JointSetpoint, JointState, LatencySummary, MasterPose,
+    MotionCommand, ServiceStatus, TorqueCommand,
 };
 
 /// One payload type: name, iceoryx2 type name, size, alignment, (field, offset, size).
@@ -137,7 +137,17 @@ pub fn payload_layouts() -> Vec<Layout> {
             refusal_max,
             command_verdicts,
             fault_code,
-            fault_joint
+            fault_joint,
+            latency_sum_ns,
+            hops
+        }),
+        layout!(HopLatency {
+            count,
+            sum_ns,
+            p50_ns,
+            p99_ns,
+            p999_ns,
+            max_ns
         }),
         layout!(CommandVerdict {
             seq,

@@ -381,6 +381,24 @@ pub struct LatencySummary {
     pub max_ns: u64,
 }
 
+/// One hop of the pipeline's latency, in ns, as a service measures it: the count, the
+/// exact sum of the samples (their mean is `sum_ns / count`, so the means of
+/// consecutive hops add up exactly) and percentiles of its histogram (0 when empty).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("microrobot::v1::HopLatency")]
+pub struct HopLatency {
+    pub count: u64,
+    pub sum_ns: u64,
+    pub p50_ns: u64,
+    pub p99_ns: u64,
+    pub p999_ns: u64,
+    pub max_ns: u64,
+}
+
+/// How many hops a status carries ([`ServiceStatus::hops`]).
+pub const STATUS_HOPS: usize = 2;
+
 /// How many recent command verdicts the planner's status carries
 /// ([`ServiceStatus::command_verdicts`]).
 pub const COMMAND_VERDICTS: usize = 16;
@@ -506,6 +524,16 @@ pub struct ServiceStatus {
     pub fault_code: u32,
     /// Actuator: the joint of the backend's last fault, 1-based; 0 = none or the whole drive.
     pub fault_joint: u32,
+    /// The exact sum of the samples in `latency`, ns (its mean is
+    /// `latency_sum_ns / latency.count`; 0 from a sender that does not keep it).
+    pub latency_sum_ns: u64,
+    /// The hops of the pipeline's latency this service measures, each from one instant
+    /// to the next of the same message (so consecutive hops add up exactly):
+    /// planner: `[wake-up → setpoint sent, -]`; dynamics: `[setpoint stamp → wake-up,
+    /// wake-up → torque stamp]`; actuator: `[torque stamp → torque taken, plant step →
+    /// state sent]`. The end-to-end `latency` of the actuator is the sum of the
+    /// dynamics' two hops and its first.
+    pub hops: [HopLatency; STATUS_HOPS],
 }
 
 impl ServiceStatus {

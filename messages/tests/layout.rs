@@ -55,7 +55,12 @@ fn status_layout_is_stable() {
     assert_eq!(COMMAND_VERDICTS, 16);
     assert_eq!(offset_of!(ServiceStatus, fault_code), 904);
     assert_eq!(offset_of!(ServiceStatus, fault_joint), 908);
-    assert_eq!(size_of::<ServiceStatus>(), 912);
+    assert_eq!(offset_of!(ServiceStatus, latency_sum_ns), 912);
+    assert_eq!(offset_of!(ServiceStatus, hops), 920);
+    assert_eq!(size_of::<HopLatency>(), 48);
+    assert_eq!(offset_of!(HopLatency, sum_ns), 8);
+    assert_eq!(STATUS_HOPS, 2);
+    assert_eq!(size_of::<ServiceStatus>(), 1016);
     assert_eq!(align_of::<ServiceStatus>(), 8);
 }
 

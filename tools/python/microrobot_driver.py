@@ -100,7 +100,15 @@ class LatencySummary(ctypes.Structure):
                 ("p9999_ns", ctypes.c_uint64), ("max_ns", ctypes.c_uint64)]
 
 
+@_named("HopLatency")
+class HopLatency(ctypes.Structure):
+    _fields_ = [("count", ctypes.c_uint64), ("sum_ns", ctypes.c_uint64),
+                ("p50_ns", ctypes.c_uint64), ("p99_ns", ctypes.c_uint64),
+                ("p999_ns", ctypes.c_uint64), ("max_ns", ctypes.c_uint64)]
+
+
 COMMAND_VERDICTS = 16
+STATUS_HOPS = 2
 
 
 @_named("CommandVerdict")
@@ -131,7 +139,8 @@ class ServiceStatus(ctypes.Structure):
                 ("refusal_value", ctypes.c_double), ("refusal_min", ctypes.c_double),
                 ("refusal_max", ctypes.c_double),
                 ("command_verdicts", CommandVerdict * COMMAND_VERDICTS),
-                ("fault_code", ctypes.c_uint32), ("fault_joint", ctypes.c_uint32)]
+                ("fault_code", ctypes.c_uint32), ("fault_joint", ctypes.c_uint32),
+                ("latency_sum_ns", ctypes.c_uint64), ("hops", HopLatency * STATUS_HOPS)]
 
 
 @_named("MasterPose")
@@ -143,7 +152,7 @@ class MasterPose(ctypes.Structure):
 
 
 PAYLOADS = [Header, JointSetpoint, TorqueCommand, JointState, MotionCommand, LatencySummary,
-            CommandVerdict, ServiceStatus, MasterPose]
+            HopLatency, CommandVerdict, ServiceStatus, MasterPose]
 
 
 # --- enums and flags (u32 on the wire) -------------------------------------------------
@@ -370,6 +379,7 @@ class LatencyHistogram:
     def __init__(self):
         self.counts = [0] * 2001
         self.n = 0
+        self.sum_ns = 0
         self.max_ns = 0
 
     def record(self, ns):
@@ -377,6 +387,7 @@ class LatencyHistogram:
         i = us if us < 1000 else min(1000 + (us - 1000) // 100, 2000)
         self.counts[i] += 1
         self.n += 1
+        self.sum_ns += ns
         self.max_ns = max(self.max_ns, ns)
 
     def summary(self):
@@ -628,7 +639,8 @@ class Driver:
                            refused_messages=c["refused"] + c["resets_refused"],
                            stale_cycles=c["stale"], clamped_cycles=c["saturated"],
                            faults=c["faults"], last_input_refusal=self.last_refusal,
-                           latency=self.latency.summary())
+                           latency=self.latency.summary(),
+                           latency_sum_ns=min(self.latency.sum_ns, 2**64 - 1))
         self.status_seq += 1
         st.seq, st.stamp_ns = self.status_seq, now_ns
         st.motion_time_s = self.latest.header.tick * self.period_s if self.latest else 0.0

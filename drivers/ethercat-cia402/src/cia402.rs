@@ -151,6 +151,31 @@ pub struct UndefinedStatusword(pub u16);
 pub struct Statusword(pub u16);
 
 impl Statusword {
+    /// Bit 4: voltage enabled (high voltage applied to the power stage).
+    pub const VOLTAGE_ENABLED: u16 = 1 << 4;
+    /// Bit 9: remote (see [`Statusword::remote`]).
+    pub const REMOTE: u16 = SW_REMOTE;
+    /// Bit 10: target reached (see [`Statusword::target_reached`]).
+    pub const TARGET_REACHED: u16 = SW_TARGET_REACHED;
+    /// Bit 11: internal limit active (see [`Statusword::internal_limit_active`]).
+    pub const INTERNAL_LIMIT: u16 = SW_INTERNAL_LIMIT;
+
+    /// The bits 0-3, 5 and 6 a drive reports in `state`: the inverse of
+    /// [`Statusword::state`], for the drive side (an emulated drive). Quick stop (bit 5)
+    /// is set where the pattern leaves it free and the drive is not quick-stopping.
+    pub const fn of_state(state: DriveState) -> Statusword {
+        Statusword(match state {
+            DriveState::NotReadyToSwitchOn => 0x0000,
+            DriveState::SwitchOnDisabled => 0x0040,
+            DriveState::ReadyToSwitchOn => 0x0021,
+            DriveState::SwitchedOn => 0x0023,
+            DriveState::OperationEnabled => 0x0027,
+            DriveState::QuickStopActive => 0x0007,
+            DriveState::FaultReactionActive => 0x000F,
+            DriveState::Fault => 0x0008,
+        })
+    }
+
     /// Decodes the power drive state from bits 0-3, 5 and 6 with the standard's masks
     /// (x = don't care, bit 15 on the left):
     ///
@@ -245,6 +270,26 @@ impl Command {
 pub struct Controlword(pub u16);
 
 impl Controlword {
+    /// The device control command in bits 0-3 (fault reset, bit 7, excluded: it acts on
+    /// its edge, which only the drive can see), decoded with the standard's patterns
+    /// (x = don't care, bit 3 on the left): `x110` Shutdown, `0111` Switch on (the same
+    /// word as Disable operation), `1111` Enable operation, `xx0x` Disable voltage,
+    /// `x01x` Quick stop. For the drive side (an emulated drive).
+    pub const fn command(self) -> Command {
+        let w = self.0;
+        if w & 0x0002 == 0 {
+            Command::DisableVoltage
+        } else if w & 0x0004 == 0 {
+            Command::QuickStop
+        } else if w & 0x0001 == 0 {
+            Command::Shutdown
+        } else if w & 0x0008 == 0 {
+            Command::SwitchOn
+        } else {
+            Command::EnableOperation
+        }
+    }
+
     /// The raw value for the process data.
     pub const fn bits(self) -> u16 {
         self.0
@@ -474,6 +519,26 @@ impl Axis {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn drive_side_encoding_round_trips_through_the_decoders() {
+        for state in DriveState::ALL {
+            assert_eq!(Statusword::of_state(state).state(), Ok(state), "{state}");
+        }
+        for command in [
+            Command::Shutdown,
+            Command::SwitchOn,
+            Command::EnableOperation,
+            Command::DisableVoltage,
+            Command::QuickStop,
+        ] {
+            assert_eq!(command.controlword().command(), command);
+        }
+        assert_eq!(
+            Command::DisableOperation.controlword().command(),
+            Command::SwitchOn
+        );
+    }
+
     use super::DriveState::*;
     use super::*;
 

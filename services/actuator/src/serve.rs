@@ -141,6 +141,8 @@ where
             core,
             ticker,
             e2e: LatencyHistogram::new(),
+            torque_to_taken: LatencyHistogram::new(),
+            step_to_state: LatencyHistogram::new(),
             // Free-running with the planner on its own timer, the plant steps are phased
             // half a period after the planner's ticks (see `wake`). When the planner
             // ticks on states, this timer is the pipeline's master clock and stays.
@@ -243,6 +245,11 @@ pub(crate) struct ActuatorStage<B: ActuatorBackend> {
     ticker: Ticker,
     /// Setpoint source stamp → torque received.
     e2e: LatencyHistogram,
+    /// Its last hop, for the same torques: torque stamp → torque received (taken from
+    /// the queue after the wake-up).
+    torque_to_taken: LatencyHistogram,
+    /// Plant step (the state's stamp) → its state sent: the backend's write and read.
+    step_to_state: LatencyHistogram,
     /// Whether the plant's steps are phased against the planner's ticks (or need not be).
     phased: bool,
     /// The torque the last published state answered, and the last torque accepted: in
@@ -261,8 +268,15 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
     /// Checks the watchdogs and steps the plant once, publishing its state.
     fn step(&mut self, ports: &Ports, now: u64) {
         self.core.check_watchdog(now);
-        let s = self.core.step(monotonic_ns());
+        self.step_and_publish(ports, monotonic_ns());
+    }
+
+    /// Steps the plant at `now` and publishes its state (timed: step → state sent).
+    fn step_and_publish(&mut self, ports: &Ports, now: u64) {
+        let s = self.core.step(now);
         self.publish(ports, s);
+        self.step_to_state
+            .record(monotonic_ns().saturating_sub(s.header.stamp_ns));
     }
 
     /// Free-running: puts the plant steps half a period after the planner's ticks, so
@@ -299,6 +313,8 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
                 self.accepted = msg.header.seq;
                 self.e2e
                     .record(now.saturating_sub(msg.header.source_stamp_ns));
+                self.torque_to_taken
+                    .record(now.saturating_sub(msg.header.stamp_ns));
                 if !cfg.lockstep && !self.phased {
                     self.phase(ports, cfg, msg.header.source_stamp_ns, now);
                 }
@@ -346,8 +362,7 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
             }
             self.core.check_watchdog(now);
             if self.core.steps_on_timer() && n < 100 {
-                let s = self.core.step(now);
-                self.publish(ports, s);
+                self.step_and_publish(ports, now);
                 n += 1;
             }
         }
@@ -420,6 +435,11 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
         st.faults = core.counters.faults;
         st.motion_time_s = core.motion_time_s();
         st.latency = self.e2e.summary();
+        st.latency_sum_ns = self.e2e.sum_ns();
+        st.hops = [
+            self.torque_to_taken.hop_latency(),
+            self.step_to_state.hop_latency(),
+        ];
         st.tracking_error_max = core.tracking_error_max;
         st.peak_torque = core.peak_torque;
         st.last_input_refusal = core

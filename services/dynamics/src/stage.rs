@@ -38,6 +38,8 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         let stage = DynamicsStage {
             core: DynamicsCore::new(&robot, cfg),
             latency: LatencyHistogram::new(),
+            setpoint_to_awake: LatencyHistogram::new(),
+            awake_to_torque: LatencyHistogram::new(),
             last_setpoint_ns: monotonic_ns(),
             input_stale_periods: 0,
             rate_hz: cfg.rate_hz,
@@ -65,6 +67,11 @@ struct DynamicsStage {
     core: DynamicsCore,
     /// Setpoint source stamp → torque published.
     latency: LatencyHistogram,
+    /// Its two hops, which add up to it sample by sample: setpoint source stamp → the
+    /// wake-up that took the setpoint, and that wake-up → torque stamp (the lockstep
+    /// wait for the measured state, the computation, the write).
+    setpoint_to_awake: LatencyHistogram,
+    awake_to_torque: LatencyHistogram,
     last_setpoint_ns: u64,
     /// Status periods that ended without a setpoint for longer than `stale_ms`.
     input_stale_periods: u64,
@@ -123,6 +130,7 @@ impl Stage for DynamicsStage {
     ) -> anyhow::Result<()> {
         let cfg = cycle.cfg;
         if ready.contains(on.setpoint) {
+            let woke = monotonic_ns();
             ports.setpoints.clear_events();
             self.take_states(&ports.states);
             // Once a stop is asked for, nothing new is computed (a torque from a state
@@ -132,6 +140,10 @@ impl Stage for DynamicsStage {
                     break;
                 };
                 let sp = r.msg;
+                let source = sp.header.source_stamp_ns;
+                // Awake for this setpoint: at the wake-up, or, for one published after
+                // it and taken in the same drain, when taken.
+                let awake = if source <= woke { woke } else { monotonic_ns() };
                 if cfg.lockstep {
                     self.await_state_for(sp.header.tick, &ports.states, cycle);
                     if cycle.shutdown.is_requested() {
@@ -146,11 +158,10 @@ impl Stage for DynamicsStage {
                 if let Ok(mut cmd) = taken {
                     cmd.header.stamp_ns = monotonic_ns();
                     ports.torques.send(cmd);
-                    self.latency.record(
-                        cmd.header
-                            .stamp_ns
-                            .saturating_sub(sp.header.source_stamp_ns),
-                    );
+                    let stamp = cmd.header.stamp_ns;
+                    self.latency.record(stamp.saturating_sub(source));
+                    self.setpoint_to_awake.record(awake.saturating_sub(source));
+                    self.awake_to_torque.record(stamp.saturating_sub(awake));
                 }
             }
         }
@@ -178,6 +189,11 @@ impl Stage for DynamicsStage {
         // Effort clamps and slew limits together (the torque flags tell them apart).
         st.clamped_cycles = core.counters.clamped_cycles + core.counters.slew_limited_cycles;
         st.latency = self.latency.summary();
+        st.latency_sum_ns = self.latency.sum_ns();
+        st.hops = [
+            self.setpoint_to_awake.hop_latency(),
+            self.awake_to_torque.hop_latency(),
+        ];
         st.peak_torque = core.peak_torque;
         st.motion_time_s = core.last_tick().unwrap_or(0) as f64 / self.rate_hz;
         st.last_input_refusal = core

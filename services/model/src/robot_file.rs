@@ -10,6 +10,7 @@ pub mod urdf_writer;
 use crate::MAX_JOINTS;
 use crate::math::Pose;
 use crate::robot::{DhParameters, Joint, JointKind, JointLimits, LinkInertia, Robot};
+use microrobot_keypath::{KeyError, Problem, Table as KeyTable, join};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use std::path::Path;
 use std::path::PathBuf;
@@ -127,7 +128,7 @@ impl Robot {
                     .into(),
             ));
         }
-        reader.robot(&table)
+        reader.robot(&KeyTable::root(origin, &table))
     }
 
     /// Parses a URDF robot (`origin`: the file name for errors) with the
@@ -144,7 +145,9 @@ impl Robot {
         };
         let chain = urdf::load(text, origin, &sel)?;
         let reader = Reader { file: origin };
-        reader.assemble_urdf(chain, &Table::new(), Pose::IDENTITY, None, None)
+        let none = Table::new();
+        let joints = KeyTable::root(origin, &none).opt_table("joints")?;
+        reader.assemble_urdf(chain, &joints, Pose::IDENTITY, None, None)
     }
 
     /// Reads a robot file: a `.urdf`, an overlay (a TOML file with
@@ -160,11 +163,12 @@ impl Robot {
         }
         let table = parse_toml(&text, &origin)?;
         let reader = Reader { file: &origin };
+        let root = KeyTable::root(&origin, &table);
         if is_overlay(&table) {
             let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-            reader.overlay(&table, &dir)
+            reader.overlay(&root, &dir)
         } else {
-            reader.robot(&table)
+            reader.robot(&root)
         }
     }
 }
@@ -196,35 +200,100 @@ fn is_overlay(table: &Table) -> bool {
     matches!(table.get("robot"), Some(Value::Table(t)) if t.contains_key("urdf"))
 }
 
-fn join(path: &str, key: &str) -> String {
-    if path.is_empty() {
-        key.to_string()
-    } else {
-        format!("{path}.{key}")
+impl From<KeyError> for RobotFileError {
+    fn from(e: KeyError) -> Self {
+        let KeyError { file, key, problem } = e;
+        match problem {
+            Problem::Missing => Self::MissingKey { file, key },
+            Problem::Unknown { expected } => Self::UnknownKey {
+                file,
+                key,
+                expected,
+            },
+            Problem::WrongType { expected } => Self::WrongType {
+                file,
+                key,
+                expected,
+            },
+            Problem::NonFinite(value) => Self::NonFinite { file, key, value },
+            Problem::Invalid(message) => Self::Invalid { file, key, message },
+        }
     }
 }
 
-/// Walks the TOML tree, carrying the file name for errors.
+/// Reads a robot file's tables (the key-by-key readers of [`microrobot_keypath`]) into a
+/// [`Robot`], with the checks that span keys.
 struct Reader<'a> {
     file: &'a str,
 }
 
 type Res<T> = Result<T, RobotFileError>;
 
+/// A positive number at `key`.
+fn positive(t: &KeyTable<'_>, key: &str) -> Res<f64> {
+    let x = t.number(key)?;
+    if x <= 0.0 {
+        return Err(t.invalid(key, format!("{x} must be > 0")).into());
+    }
+    Ok(x)
+}
+
+/// A number >= 0 at `key`; `default` when absent (`None`: required).
+fn non_negative(t: &KeyTable<'_>, key: &str, default: Option<f64>) -> Res<f64> {
+    let x = match default {
+        Some(d) => t.opt_number(key)?.unwrap_or(d),
+        None => t.number(key)?,
+    };
+    if x < 0.0 {
+        return Err(t
+            .invalid(key, format!("{x} is negative, must be >= 0"))
+            .into());
+    }
+    Ok(x)
+}
+
+/// Three finite numbers at `key`.
+fn vec3(t: &KeyTable<'_>, key: &str) -> Res<Vector3<f64>> {
+    let arr = match t.get(key) {
+        None => return Err(t.error(key, Problem::Missing).into()),
+        Some(Value::Array(a)) if a.len() == 3 => a,
+        Some(_) => return Err(t.wrong_type(key, "an array of 3 numbers").into()),
+    };
+    let mut v = Vector3::zeros();
+    for (i, x) in arr.iter().enumerate() {
+        v[i] = t.number_of(x, format!("{}[{i}]", t.key(key)))?;
+    }
+    Ok(v)
+}
+
+/// A 3×3 array of finite numbers at `key`.
+fn mat3(t: &KeyTable<'_>, key: &str) -> Res<Matrix3<f64>> {
+    let full = t.key(key);
+    let rows = match t.get(key) {
+        None => return Err(t.error(key, Problem::Missing).into()),
+        Some(Value::Array(a)) if a.len() == 3 => a,
+        Some(_) => return Err(t.wrong_type(key, "a 3×3 array of arrays").into()),
+    };
+    let mut m = Matrix3::zeros();
+    for (r, row) in rows.iter().enumerate() {
+        let row = match row {
+            Value::Array(a) if a.len() == 3 => a,
+            _ => {
+                return Err(RobotFileError::WrongType {
+                    file: t.file().to_string(),
+                    key: format!("{full}[{r}]"),
+                    expected: "an array of 3 numbers",
+                });
+            }
+        };
+        for (c, x) in row.iter().enumerate() {
+            m[(r, c)] = t.number_of(x, format!("{full}[{r}][{c}]"))?;
+        }
+    }
+    Ok(m)
+}
+
 impl Reader<'_> {
-    fn missing(&self, key: String) -> RobotFileError {
-        RobotFileError::MissingKey {
-            file: self.file.to_string(),
-            key,
-        }
-    }
-    fn wrong(&self, key: String, expected: &'static str) -> RobotFileError {
-        RobotFileError::WrongType {
-            file: self.file.to_string(),
-            key,
-            expected,
-        }
-    }
     fn invalid(&self, key: String, message: String) -> RobotFileError {
         RobotFileError::Invalid {
             file: self.file.to_string(),
@@ -233,140 +302,24 @@ impl Reader<'_> {
         }
     }
 
-    fn check_keys(&self, t: &Table, path: &str, allowed: &[&str]) -> Res<()> {
-        for k in t.keys() {
-            if !allowed.contains(&k.as_str()) {
-                return Err(RobotFileError::UnknownKey {
-                    file: self.file.to_string(),
-                    key: join(path, k),
-                    expected: allowed.join(", "),
-                });
-            }
-        }
-        Ok(())
-    }
-
-    fn table<'t>(&self, t: &'t Table, path: &str, key: &str) -> Res<&'t Table> {
-        match t.get(key) {
-            None => Err(self.missing(join(path, key))),
-            Some(Value::Table(inner)) => Ok(inner),
-            Some(_) => Err(self.wrong(join(path, key), "a table")),
-        }
-    }
-
-    fn opt_table<'t>(&self, t: &'t Table, path: &str, key: &str) -> Res<Option<&'t Table>> {
-        match t.get(key) {
-            None => Ok(None),
-            Some(Value::Table(inner)) => Ok(Some(inner)),
-            Some(_) => Err(self.wrong(join(path, key), "a table")),
-        }
-    }
-
-    fn string<'t>(&self, t: &'t Table, path: &str, key: &str) -> Res<&'t str> {
-        match t.get(key) {
-            None => Err(self.missing(join(path, key))),
-            Some(Value::String(s)) => Ok(s),
-            Some(_) => Err(self.wrong(join(path, key), "a string")),
-        }
-    }
-
-    fn value_number(&self, v: &Value, key: String) -> Res<f64> {
-        let x = match v {
-            Value::Float(x) => *x,
-            Value::Integer(i) => *i as f64,
-            _ => return Err(self.wrong(key, "a number")),
-        };
-        if !x.is_finite() {
-            return Err(RobotFileError::NonFinite {
-                file: self.file.to_string(),
-                key,
-                value: x,
-            });
-        }
-        Ok(x)
-    }
-
-    fn number(&self, t: &Table, path: &str, key: &str) -> Res<f64> {
-        match t.get(key) {
-            None => Err(self.missing(join(path, key))),
-            Some(v) => self.value_number(v, join(path, key)),
-        }
-    }
-
-    fn opt_number(&self, t: &Table, path: &str, key: &str, default: f64) -> Res<f64> {
-        match t.get(key) {
-            None => Ok(default),
-            Some(v) => self.value_number(v, join(path, key)),
-        }
-    }
-
-    fn non_negative(&self, t: &Table, path: &str, key: &str, default: Option<f64>) -> Res<f64> {
-        let x = match default {
-            Some(d) => self.opt_number(t, path, key, d)?,
-            None => self.number(t, path, key)?,
-        };
-        if x < 0.0 {
-            return Err(self.invalid(join(path, key), format!("{x} is negative, must be >= 0")));
-        }
-        Ok(x)
-    }
-
-    fn positive(&self, t: &Table, path: &str, key: &str) -> Res<f64> {
-        let x = self.number(t, path, key)?;
-        if x <= 0.0 {
-            return Err(self.invalid(join(path, key), format!("{x} must be > 0")));
-        }
-        Ok(x)
-    }
-
-    fn vec3(&self, t: &Table, path: &str, key: &str) -> Res<Vector3<f64>> {
-        let full = join(path, key);
-        let arr = match t.get(key) {
-            None => return Err(self.missing(full)),
-            Some(Value::Array(a)) if a.len() == 3 => a,
-            Some(_) => return Err(self.wrong(full, "an array of 3 numbers")),
-        };
-        let mut v = Vector3::zeros();
-        for (i, x) in arr.iter().enumerate() {
-            v[i] = self.value_number(x, format!("{full}[{i}]"))?;
-        }
-        Ok(v)
-    }
-
-    fn mat3(&self, t: &Table, path: &str, key: &str) -> Res<Matrix3<f64>> {
-        let full = join(path, key);
-        let rows = match t.get(key) {
-            None => return Err(self.missing(full)),
-            Some(Value::Array(a)) if a.len() == 3 => a,
-            Some(_) => return Err(self.wrong(full, "a 3×3 array of arrays")),
-        };
-        let mut m = Matrix3::zeros();
-        for (r, row) in rows.iter().enumerate() {
-            let row = match row {
-                Value::Array(a) if a.len() == 3 => a,
-                _ => return Err(self.wrong(format!("{full}[{r}]"), "an array of 3 numbers")),
-            };
-            for (c, x) in row.iter().enumerate() {
-                m[(r, c)] = self.value_number(x, format!("{full}[{r}][{c}]"))?;
-            }
-        }
-        Ok(m)
-    }
-
-    fn robot(&self, root: &Table) -> Res<Robot> {
-        self.check_keys(root, "", &["robot", "joints", "tool", "payload"])?;
-        let head = self.table(root, "", "robot")?;
-        self.check_keys(head, "robot", &["name", "gravity_mps2"])?;
-        let name = self.string(head, "robot", "name")?;
+    fn robot(&self, root: &KeyTable<'_>) -> Res<Robot> {
+        root.allow(&["robot", "joints", "tool", "payload"])?;
+        let head = root.table("robot")?;
+        head.allow(&["name", "gravity_mps2"])?;
+        let name = head.string("name")?;
         if name.trim().is_empty() {
             return Err(self.invalid("robot.name".into(), "must not be empty".into()));
         }
-        let gravity = self.vec3(head, "robot", "gravity_mps2")?;
+        let gravity = vec3(&head, "gravity_mps2")?;
 
         let joint_values = match root.get("joints") {
-            None => return Err(self.missing("joints".into())),
+            None => return Err(root.error("joints", Problem::Missing).into()),
             Some(Value::Array(a)) => a,
-            Some(_) => return Err(self.wrong("joints".into(), "an array of tables ([[joints]])")),
+            Some(_) => {
+                return Err(root
+                    .wrong_type("joints", "an array of tables ([[joints]])")
+                    .into());
+            }
         };
         if joint_values.is_empty() || joint_values.len() > MAX_JOINTS {
             return Err(self.invalid(
@@ -381,9 +334,13 @@ impl Reader<'_> {
         for (i, v) in joint_values.iter().enumerate() {
             let path = format!("joints[{i}]");
             let Value::Table(t) = v else {
-                return Err(self.wrong(path, "a table"));
+                return Err(RobotFileError::WrongType {
+                    file: self.file.to_string(),
+                    key: path,
+                    expected: "a table",
+                });
             };
-            let joint = self.joint(t, &path)?;
+            let joint = self.joint(&root.element(path.clone(), t))?;
             if joints.iter().any(|j: &Joint| j.name == joint.name) {
                 return Err(self.invalid(
                     join(&path, "name"),
@@ -407,30 +364,17 @@ impl Reader<'_> {
             .map_err(|e| self.invalid("joints".into(), e.to_string()))
     }
 
-    fn opt_string<'t>(&self, t: &'t Table, path: &str, key: &str) -> Res<Option<&'t str>> {
-        match t.get(key) {
-            None => Ok(None),
-            Some(_) => self.string(t, path, key).map(Some),
-        }
-    }
-
     /// `[tool]` (`xyz_mm`, `rpy_deg`) and `[payload]` of a DH file or an overlay.
-    fn tool_and_payload(&self, root: &Table) -> Res<(Pose, Option<LinkInertia>)> {
-        let tool = match self.opt_table(root, "", "tool")? {
+    fn tool_and_payload(&self, root: &KeyTable<'_>) -> Res<(Pose, Option<LinkInertia>)> {
+        let t = root.section("tool", &["xyz_mm", "rpy_deg"])?;
+        let tool = match t.raw() {
             None => Pose::IDENTITY,
-            Some(t) => {
-                self.check_keys(t, "tool", &["xyz_mm", "rpy_deg"])?;
-                let xyz = self.vec3(t, "tool", "xyz_mm")? * MM;
-                let rpy = self.vec3(t, "tool", "rpy_deg")? * DEG;
-                Pose::from_xyz_rpy(xyz, rpy)
-            }
+            Some(_) => Pose::from_xyz_rpy(vec3(&t, "xyz_mm")? * MM, vec3(&t, "rpy_deg")? * DEG),
         };
-        let payload = match self.opt_table(root, "", "payload")? {
+        let t = root.section("payload", &["mass_kg", "com_mm", "inertia_kgmm2"])?;
+        let payload = match t.raw() {
             None => None,
-            Some(t) => {
-                self.check_keys(t, "payload", &["mass_kg", "com_mm", "inertia_kgmm2"])?;
-                Some(self.inertia(t, "payload")?)
-            }
+            Some(_) => Some(self.inertia(&t)?),
         };
         Ok((tool, payload))
     }
@@ -439,30 +383,25 @@ impl Reader<'_> {
     /// `name`, `base_link`, `tip_link`, `gravity_mps2`; `[joints.NAME]` limits,
     /// actuator and friction values in the DH files' units; `[lock]` positions
     /// (rad or m, as in URDF) of joints off the path; `[tool]`, `[payload]`.
-    fn overlay(&self, root: &Table, dir: &Path) -> Res<Robot> {
-        self.check_keys(root, "", &["robot", "joints", "lock", "tool", "payload"])?;
-        let head = self.table(root, "", "robot")?;
-        self.check_keys(
-            head,
-            "robot",
-            &["urdf", "name", "base_link", "tip_link", "gravity_mps2"],
-        )?;
-        let urdf_rel = self.string(head, "robot", "urdf")?;
-        let base_link = self.opt_string(head, "robot", "base_link")?;
-        let tip_link = self.opt_string(head, "robot", "tip_link")?;
-        let name = self.opt_string(head, "robot", "name")?;
+    fn overlay(&self, root: &KeyTable<'_>, dir: &Path) -> Res<Robot> {
+        root.allow(&["robot", "joints", "lock", "tool", "payload"])?;
+        let head = root.table("robot")?;
+        head.allow(&["urdf", "name", "base_link", "tip_link", "gravity_mps2"])?;
+        let urdf_rel = head.string("urdf")?;
+        let base_link = head.opt_string("base_link")?;
+        let tip_link = head.opt_string("tip_link")?;
+        let name = head.opt_string("name")?;
         if name.is_some_and(|n| n.trim().is_empty()) {
             return Err(self.invalid("robot.name".into(), "must not be empty".into()));
         }
         let gravity = match head.get("gravity_mps2") {
             None => None,
-            Some(_) => Some(self.vec3(head, "robot", "gravity_mps2")?),
+            Some(_) => Some(vec3(&head, "gravity_mps2")?),
         };
         let mut lock = Vec::new();
-        if let Some(t) = self.opt_table(root, "", "lock")? {
-            for (k, v) in t {
-                lock.push((k.clone(), self.value_number(v, join("lock", k))?));
-            }
+        let t = root.opt_table("lock")?;
+        for (k, v) in t.raw().into_iter().flatten() {
+            lock.push((k.clone(), t.number_of(v, t.key(k))?));
         }
         let urdf_path: PathBuf = dir.join(urdf_rel);
         let text = std::fs::read_to_string(&urdf_path).map_err(|e| {
@@ -482,10 +421,7 @@ impl Reader<'_> {
         if let Some(n) = name {
             chain.name = n.to_string();
         }
-        let joints_t = self
-            .opt_table(root, "", "joints")?
-            .cloned()
-            .unwrap_or_default();
+        let joints_t = root.opt_table("joints")?;
         let (tool, payload) = self.tool_and_payload(root)?;
         self.assemble_urdf(chain, &joints_t, tool, payload, gravity)
     }
@@ -495,13 +431,13 @@ impl Reader<'_> {
     fn assemble_urdf(
         &self,
         mut chain: urdf::UrdfChain,
-        joints_t: &Table,
+        joints_t: &KeyTable<'_>,
         tool: Pose,
         payload: Option<LinkInertia>,
         gravity: Option<Vector3<f64>>,
     ) -> Res<Robot> {
         let names: Vec<&str> = chain.joints.iter().map(|j| j.name.as_str()).collect();
-        for k in joints_t.keys() {
+        for k in joints_t.raw().into_iter().flat_map(|t| t.keys()) {
             if !names.contains(&k.as_str()) {
                 return Err(RobotFileError::UnknownKey {
                     file: self.file.to_string(),
@@ -512,7 +448,6 @@ impl Reader<'_> {
         }
         let mut missing = Vec::new();
         for joint in &mut chain.joints {
-            let path = join("joints", &joint.name);
             let revolute = joint.kind == JointKind::Revolute;
             let keys: [&str; 8] = if revolute {
                 [
@@ -538,8 +473,9 @@ impl Reader<'_> {
                 ]
             };
             let unit = if revolute { DEG } else { MM };
-            if let Some(t) = self.opt_table(joints_t, "joints", &joint.name)? {
-                self.check_keys(t, &path, &keys)?;
+            let t = joints_t.section(&joint.name, &keys)?;
+            let path = t.path().to_string();
+            if t.raw().is_some() {
                 let l = &mut joint.limits;
                 for (k, slot, scale) in [
                     (keys[0], &mut l.velocity, unit),
@@ -547,19 +483,18 @@ impl Reader<'_> {
                     (keys[2], &mut l.jerk, unit),
                     (keys[3], &mut l.effort, 1.0),
                 ] {
-                    if t.contains_key(k) {
-                        *slot = self.positive(t, &path, k)? * scale;
+                    if t.get(k).is_some() {
+                        *slot = positive(&t, k)? * scale;
                     }
                 }
                 let rotor_scale = if revolute { KGMM2 } else { 1.0 };
-                joint.rotor_inertia =
-                    self.non_negative(t, &path, keys[4], Some(0.0))? * rotor_scale;
-                if t.contains_key(keys[5]) {
-                    joint.gear_ratio = self.positive(t, &path, keys[5])?;
+                joint.rotor_inertia = non_negative(&t, keys[4], Some(0.0))? * rotor_scale;
+                if t.get(keys[5]).is_some() {
+                    joint.gear_ratio = positive(&t, keys[5])?;
                 }
                 let (v, c) = (joint.viscous_friction, joint.coulomb_friction);
-                joint.viscous_friction = self.non_negative(t, &path, keys[6], Some(v))?;
-                joint.coulomb_friction = self.non_negative(t, &path, keys[7], Some(c))?;
+                joint.viscous_friction = non_negative(&t, keys[6], Some(v))?;
+                joint.coulomb_friction = non_negative(&t, keys[7], Some(c))?;
             }
             let l = &joint.limits;
             for (k, v) in keys[..4]
@@ -578,8 +513,9 @@ impl Reader<'_> {
             .map_err(|e| self.invalid("joints".into(), e.to_string()))
     }
 
-    fn joint(&self, t: &Table, path: &str) -> Res<Joint> {
-        let kind_str = self.string(t, path, "kind")?;
+    fn joint(&self, t: &KeyTable<'_>) -> Res<Joint> {
+        let path = t.path();
+        let kind_str = t.string("kind")?;
         let kind = match kind_str {
             "revolute" => JointKind::Revolute,
             "prismatic" => JointKind::Prismatic,
@@ -596,37 +532,31 @@ impl Reader<'_> {
         } else {
             ("viscous_friction_nsm", "coulomb_friction_n")
         };
-        self.check_keys(
-            t,
-            path,
-            &[
-                "name",
-                "kind",
-                "dh",
-                "limits",
-                "link",
-                "gear_ratio",
-                viscous_key,
-                coulomb_key,
-            ],
-        )?;
-        let name = self.string(t, path, "name")?.to_string();
+        t.allow(&[
+            "name",
+            "kind",
+            "dh",
+            "limits",
+            "link",
+            "gear_ratio",
+            viscous_key,
+            coulomb_key,
+        ])?;
+        let name = t.string("name")?.to_string();
         if name.trim().is_empty() {
             return Err(self.invalid(join(path, "name"), "must not be empty".into()));
         }
 
-        let dh_path = join(path, "dh");
-        let dh_t = self.table(t, path, "dh")?;
-        self.check_keys(dh_t, &dh_path, &["theta_deg", "d_mm", "a_mm", "alpha_deg"])?;
+        let dh_t = t.table("dh")?;
+        dh_t.allow(&["theta_deg", "d_mm", "a_mm", "alpha_deg"])?;
         let dh = DhParameters {
-            theta: self.number(dh_t, &dh_path, "theta_deg")? * DEG,
-            d: self.number(dh_t, &dh_path, "d_mm")? * MM,
-            a: self.number(dh_t, &dh_path, "a_mm")? * MM,
-            alpha: self.number(dh_t, &dh_path, "alpha_deg")? * DEG,
+            theta: dh_t.number("theta_deg")? * DEG,
+            d: dh_t.number("d_mm")? * MM,
+            a: dh_t.number("a_mm")? * MM,
+            alpha: dh_t.number("alpha_deg")? * DEG,
         };
 
-        let lim_path = join(path, "limits");
-        let lim_t = self.table(t, path, "limits")?;
+        let lim_t = t.table("limits")?;
         let keys: [&str; 6] = if revolute {
             [
                 "min_deg",
@@ -646,42 +576,39 @@ impl Reader<'_> {
                 "force_n",
             ]
         };
-        self.check_keys(lim_t, &lim_path, &keys)?;
+        lim_t.allow(&keys)?;
         let unit = if revolute { DEG } else { MM };
-        let min_raw = self.number(lim_t, &lim_path, keys[0])?;
-        let max_raw = self.number(lim_t, &lim_path, keys[1])?;
+        let min_raw = lim_t.number(keys[0])?;
+        let max_raw = lim_t.number(keys[1])?;
         if min_raw > max_raw {
-            return Err(self.invalid(
-                join(&lim_path, keys[0]),
-                format!("{min_raw} is above {} = {max_raw}", keys[1]),
-            ));
+            return Err(lim_t
+                .invalid(
+                    keys[0],
+                    format!("{min_raw} is above {} = {max_raw}", keys[1]),
+                )
+                .into());
         }
         let limits = JointLimits {
             min: min_raw * unit,
             max: max_raw * unit,
-            velocity: self.positive(lim_t, &lim_path, keys[2])? * unit,
-            acceleration: self.positive(lim_t, &lim_path, keys[3])? * unit,
-            jerk: self.positive(lim_t, &lim_path, keys[4])? * unit,
-            effort: self.positive(lim_t, &lim_path, keys[5])?,
+            velocity: positive(&lim_t, keys[2])? * unit,
+            acceleration: positive(&lim_t, keys[3])? * unit,
+            jerk: positive(&lim_t, keys[4])? * unit,
+            effort: positive(&lim_t, keys[5])?,
         };
 
-        let link_path = join(path, "link");
-        let link_t = self.table(t, path, "link")?;
+        let link_t = t.table("link")?;
         let rotor_key = if revolute {
             "rotor_inertia_kgmm2"
         } else {
             "rotor_mass_kg"
         };
-        self.check_keys(
-            link_t,
-            &link_path,
-            &["mass_kg", "com_mm", "inertia_kgmm2", rotor_key],
-        )?;
-        let link = self.inertia(link_t, &link_path)?;
-        let rotor_inertia = self.non_negative(link_t, &link_path, rotor_key, Some(0.0))?
-            * if revolute { KGMM2 } else { 1.0 };
+        link_t.allow(&["mass_kg", "com_mm", "inertia_kgmm2", rotor_key])?;
+        let link = self.inertia(&link_t)?;
+        let rotor_inertia =
+            non_negative(&link_t, rotor_key, Some(0.0))? * if revolute { KGMM2 } else { 1.0 };
 
-        let gear_ratio = self.opt_number(t, path, "gear_ratio", 1.0)?;
+        let gear_ratio = t.opt_number("gear_ratio")?.unwrap_or(1.0);
         if gear_ratio <= 0.0 {
             return Err(self.invalid(
                 join(path, "gear_ratio"),
@@ -697,17 +624,17 @@ impl Reader<'_> {
             link,
             rotor_inertia,
             gear_ratio,
-            viscous_friction: self.non_negative(t, path, viscous_key, Some(0.0))?,
-            coulomb_friction: self.non_negative(t, path, coulomb_key, Some(0.0))?,
+            viscous_friction: non_negative(t, viscous_key, Some(0.0))?,
+            coulomb_friction: non_negative(t, coulomb_key, Some(0.0))?,
         })
     }
 
     /// `mass_kg`, `com_mm`, `inertia_kgmm2` of a link or the payload.
-    fn inertia(&self, t: &Table, path: &str) -> Res<LinkInertia> {
-        let mass = self.non_negative(t, path, "mass_kg", None)?;
-        let com = self.vec3(t, path, "com_mm")? * MM;
-        let raw = self.mat3(t, path, "inertia_kgmm2")?;
-        let key = join(path, "inertia_kgmm2");
+    fn inertia(&self, t: &KeyTable<'_>) -> Res<LinkInertia> {
+        let mass = non_negative(t, "mass_kg", None)?;
+        let com = vec3(t, "com_mm")? * MM;
+        let raw = mat3(t, "inertia_kgmm2")?;
+        let key = t.key("inertia_kgmm2");
         let scale = raw.abs().max().max(1e-300);
         for (r, c) in [(0, 1), (0, 2), (1, 2)] {
             if (raw[(r, c)] - raw[(c, r)]).abs() > 1e-9 * scale {

@@ -105,6 +105,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             core,
             ticker,
             lateness: LatencyHistogram::new(),
+            wake_to_setpoint: LatencyHistogram::new(),
             state_clock_misses: 0,
             on_states,
             lockstep: cfg.lockstep,
@@ -139,6 +140,8 @@ struct PlannerStage {
     /// Wake-up after the tick's ideal time (or after the state's stamp, ticking on
     /// states).
     lateness: LatencyHistogram,
+    /// Wake-up for a tick (the instant its lateness ends) → its setpoint sent.
+    wake_to_setpoint: LatencyHistogram,
     /// Ticks on states that woke more than one period after the state was stamped.
     state_clock_misses: u64,
     on_states: bool,
@@ -200,6 +203,8 @@ impl PlannerStage {
                 }
                 self.core.check_state(now);
                 ports.setpoints.send(self.core.tick(now));
+                self.wake_to_setpoint
+                    .record(monotonic_ns().saturating_sub(now));
             }
         });
     }
@@ -218,6 +223,8 @@ impl PlannerStage {
                 self.lateness.record(now.saturating_sub(t.ideal_ns));
                 self.core.check_state(now);
                 ports.setpoints.send(self.core.tick(monotonic_ns()));
+                self.wake_to_setpoint
+                    .record(monotonic_ns().saturating_sub(now));
             }
         }
     }
@@ -308,6 +315,8 @@ impl Stage for PlannerStage {
         st.program_end = end as u32;
         st.activity = core.activity() as u32;
         st.latency = self.lateness.summary();
+        st.latency_sum_ns = self.lateness.sum_ns();
+        st.hops[0] = self.wake_to_setpoint.hop_latency();
     }
 
     fn finish(&mut self, _ports: &Ports) {

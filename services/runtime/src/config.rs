@@ -9,6 +9,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use microrobot_keypath::{KeyError, Range, Table as KeyTable};
 use toml::{Table, Value};
 
 mod teleop;
@@ -531,171 +532,40 @@ fn quote(s: &str) -> String {
     Value::String(s.to_string()).to_string()
 }
 
-fn join(path: &str, key: &str) -> String {
-    if path.is_empty() {
-        key.to_string()
-    } else {
-        format!("{path}.{key}")
-    }
-}
-
-/// A table being read: remembers which keys were consumed so leftovers are refused.
-struct Tab<'t> {
-    path: String,
-    table: Option<&'t Table>,
-    allowed: &'static [&'static str],
-}
-
+/// Reads the pipeline file: the key-by-key readers of [`microrobot_keypath`] plus the
+/// checks that span keys (they name the key they refuse).
 struct Reader<'a> {
     file: &'a str,
 }
 
 type Res<T> = Result<T, ConfigError>;
 
+impl From<KeyError> for ConfigError {
+    fn from(e: KeyError) -> Self {
+        Self {
+            file: e.file,
+            key: Some(e.key),
+            message: e.problem.to_string(),
+        }
+    }
+}
+
 impl Reader<'_> {
     fn err(&self, key: &str, message: impl Into<String>) -> ConfigError {
         ConfigError::at(self.file, key, message)
     }
 
-    fn tab<'t>(
-        &self,
-        parent: &'t Table,
-        path: &str,
-        key: &str,
-        allowed: &'static [&'static str],
-    ) -> Res<Tab<'t>> {
-        let full = join(path, key);
-        let table = match parent.get(key) {
-            None => None,
-            Some(Value::Table(t)) => Some(t),
-            Some(_) => return Err(self.err(&full, "expected a table")),
-        };
-        let tab = Tab {
-            path: full,
-            table,
-            allowed,
-        };
-        self.check_unknown(&tab)?;
-        Ok(tab)
-    }
-
-    fn check_unknown(&self, tab: &Tab<'_>) -> Res<()> {
-        if let Some(t) = tab.table {
-            for k in t.keys() {
-                if !tab.allowed.contains(&k.as_str()) {
-                    return Err(self.err(
-                        &join(&tab.path, k),
-                        format!("unknown key (expected one of: {})", tab.allowed.join(", ")),
-                    ));
-                }
-            }
-        }
-        Ok(())
-    }
-
-    fn get<'t>(&self, tab: &Tab<'t>, key: &str) -> Option<&'t Value> {
-        tab.table.and_then(|t| t.get(key))
-    }
-
-    fn f64_in(
-        &self,
-        tab: &Tab<'_>,
-        key: &str,
-        default: f64,
-        lo: f64,
-        hi: f64,
-        lo_open: bool,
-    ) -> Res<f64> {
-        let k = join(&tab.path, key);
-        let v = match self.get(tab, key) {
-            None => return Ok(default),
-            Some(Value::Float(v)) => *v,
-            Some(Value::Integer(i)) => *i as f64,
-            Some(_) => return Err(self.err(&k, "expected a number")),
-        };
-        if !v.is_finite() {
-            return Err(self.err(&k, format!("{v} is not a finite number")));
-        }
-        let below = if lo_open { v <= lo } else { v < lo };
-        if below || v > hi {
-            let open = if lo_open { "(" } else { "[" };
-            return Err(self.err(&k, format!("{v} is out of range {open}{lo}, {hi}]")));
-        }
-        Ok(v)
-    }
-
-    fn opt_f64_in(&self, tab: &Tab<'_>, key: &str, lo: f64, hi: f64) -> Res<Option<f64>> {
-        match self.get(tab, key) {
-            None => Ok(None),
-            Some(_) => self.f64_in(tab, key, 0.0, lo, hi, true).map(Some),
-        }
-    }
-
-    fn u64_in(&self, tab: &Tab<'_>, key: &str, default: u64, lo: u64, hi: u64) -> Res<u64> {
-        let k = join(&tab.path, key);
-        match self.get(tab, key) {
-            None => Ok(default),
-            Some(Value::Integer(i)) => {
-                if *i < 0 || (*i as u64) < lo || (*i as u64) > hi {
-                    Err(self.err(&k, format!("{i} is out of range [{lo}, {hi}]")))
-                } else {
-                    Ok(*i as u64)
-                }
-            }
-            Some(_) => Err(self.err(&k, "expected an integer")),
-        }
-    }
-
-    fn bool(&self, tab: &Tab<'_>, key: &str, default: bool) -> Res<bool> {
-        match self.get(tab, key) {
-            None => Ok(default),
-            Some(Value::Boolean(b)) => Ok(*b),
-            Some(_) => Err(self.err(&join(&tab.path, key), "expected true or false")),
-        }
-    }
-
-    fn string(&self, tab: &Tab<'_>, key: &str) -> Res<Option<String>> {
-        match self.get(tab, key) {
-            None => Ok(None),
-            Some(Value::String(s)) => Ok(Some(s.clone())),
-            Some(_) => Err(self.err(&join(&tab.path, key), "expected a string")),
-        }
-    }
-
-    fn choice<T: Copy>(
-        &self,
-        tab: &Tab<'_>,
-        key: &str,
-        default: T,
-        options: &[(&str, T)],
-    ) -> Res<T> {
-        match self.string(tab, key)? {
-            None => Ok(default),
-            Some(s) => options
-                .iter()
-                .find(|(n, _)| *n == s)
-                .map(|(_, v)| *v)
-                .ok_or_else(|| {
-                    let names: Vec<&str> = options.iter().map(|(n, _)| *n).collect();
-                    self.err(
-                        &join(&tab.path, key),
-                        format!("`{s}` is not one of: {}", names.join(", ")),
-                    )
-                }),
-        }
-    }
-
     fn path(
         &self,
-        tab: &Tab<'_>,
+        tab: &KeyTable<'_>,
         key: &str,
         base: &Path,
         must_exist: bool,
     ) -> Res<Option<PathBuf>> {
-        let Some(s) = self.string(tab, key)? else {
+        let Some(s) = tab.opt_string(key)? else {
             return Ok(None);
         };
-        let k = join(&tab.path, key);
+        let k = tab.key(key);
         if s.is_empty() {
             return Err(self.err(&k, "empty path"));
         }
@@ -709,28 +579,26 @@ impl Reader<'_> {
 
     fn pipeline(&self, root: &Table, base: &Path) -> Res<PipelineConfig> {
         let d = PipelineConfig::default();
-        let top = Tab {
-            path: String::new(),
-            table: Some(root),
-            allowed: &[
-                "instance",
-                "rate_hz",
-                "duration_s",
-                "robot",
-                "program",
-                "lockstep",
-                "status_period_ms",
-                "watchdog",
-                "planner",
-                "dynamics",
-                "actuator",
-                "realtime",
-                "supervisor",
-                "teleop",
-            ],
-        };
-        self.check_unknown(&top)?;
-        let instance = self.string(&top, "instance")?.unwrap_or(d.instance.clone());
+        let top = KeyTable::root(self.file, root);
+        top.allow(&[
+            "instance",
+            "rate_hz",
+            "duration_s",
+            "robot",
+            "program",
+            "lockstep",
+            "status_period_ms",
+            "watchdog",
+            "planner",
+            "dynamics",
+            "actuator",
+            "realtime",
+            "supervisor",
+            "teleop",
+        ])?;
+        let instance = top
+            .opt_string("instance")?
+            .map_or(d.instance.clone(), str::to_string);
         if instance.is_empty()
             || instance.len() > 64
             || !instance
@@ -742,8 +610,8 @@ impl Reader<'_> {
                 format!("`{instance}` must be 1 to 64 characters of A-Z a-z 0-9 _ -"),
             ));
         }
-        let rate_hz = self.f64_in(&top, "rate_hz", d.rate_hz, 1.0, 10_000.0, false)?;
-        let duration_s = self.opt_f64_in(&top, "duration_s", 0.0, 1.0e7)?;
+        let rate_hz = top.number_in("rate_hz", d.rate_hz, Range::closed(1.0, 10_000.0))?;
+        let duration_s = top.opt_number_in("duration_s", Range::left_open(0.0, 1.0e7))?;
         let robot = match self.path(&top, "robot", base, true)? {
             Some(p) => p,
             None => {
@@ -758,19 +626,14 @@ impl Reader<'_> {
             }
         };
         let program = self.path(&top, "program", base, true)?;
-        let lockstep = self.bool(&top, "lockstep", d.lockstep)?;
-        let status_period_ms = self.f64_in(
-            &top,
+        let lockstep = top.bool_or("lockstep", d.lockstep)?;
+        let status_period_ms = top.number_in(
             "status_period_ms",
             d.status_period_ms,
-            10.0,
-            10_000.0,
-            false,
+            Range::closed(10.0, 10_000.0),
         )?;
 
-        let t = self.tab(
-            root,
-            "",
+        let t = top.section(
             "watchdog",
             &[
                 "stale_ms",
@@ -781,8 +644,8 @@ impl Reader<'_> {
             ],
         )?;
         let dw = &d.watchdog;
-        let stale_ms = self.f64_in(&t, "stale_ms", dw.stale_ms, 0.0, 60_000.0, true)?;
-        let fault_ms = self.f64_in(&t, "fault_ms", dw.fault_ms, 0.0, 60_000.0, true)?;
+        let stale_ms = t.number_in("stale_ms", dw.stale_ms, Range::left_open(0.0, 60_000.0))?;
+        let fault_ms = t.number_in("fault_ms", dw.fault_ms, Range::left_open(0.0, 60_000.0))?;
         if fault_ms < stale_ms {
             return Err(self.err(
                 "watchdog.fault_ms",
@@ -802,19 +665,16 @@ impl Reader<'_> {
         let watchdog = WatchdogConfig {
             stale_ms,
             fault_ms,
-            safe_state: self.choice(
-                &t,
+            safe_state: t.choice(
                 "safe_state",
                 dw.safe_state,
                 &[("hold", SafeStateMode::Hold), ("damp", SafeStateMode::Damp)],
             )?,
-            auto_resume: self.bool(&t, "auto_resume", dw.auto_resume)?,
-            ramp_ms: self.f64_in(&t, "ramp_ms", dw.ramp_ms, 0.0, 10_000.0, false)?,
+            auto_resume: t.bool_or("auto_resume", dw.auto_resume)?,
+            ramp_ms: t.number_in("ramp_ms", dw.ramp_ms, Range::closed(0.0, 10_000.0))?,
         };
 
-        let t = self.tab(
-            root,
-            "",
+        let t = top.section(
             "planner",
             &[
                 "state_timeout_ms",
@@ -826,40 +686,27 @@ impl Reader<'_> {
         )?;
         let dp = &d.planner;
         let planner = PlannerConfig {
-            state_timeout_ms: self.f64_in(
-                &t,
+            state_timeout_ms: t.number_in(
                 "state_timeout_ms",
                 dp.state_timeout_ms,
-                0.0,
-                600_000.0,
-                true,
+                Range::left_open(0.0, 600_000.0),
             )?,
-            limit_scale: self.f64_in(
-                &t,
+            limit_scale: t.number_in(
                 "limit_scale",
                 dp.limit_scale,
-                MIN_LIMIT_SCALE,
-                1.0,
-                false,
+                Range::closed(MIN_LIMIT_SCALE, 1.0),
             )?,
-            estop_limit_scale: self.f64_in(
-                &t,
+            estop_limit_scale: t.number_in(
                 "estop_limit_scale",
                 dp.estop_limit_scale,
-                MIN_LIMIT_SCALE,
-                1.0,
-                false,
+                Range::closed(MIN_LIMIT_SCALE, 1.0),
             )?,
-            command_max_age_ms: self.f64_in(
-                &t,
+            command_max_age_ms: t.number_in(
                 "command_max_age_ms",
                 dp.command_max_age_ms,
-                0.0,
-                3_600_000.0,
-                true,
+                Range::left_open(0.0, 3_600_000.0),
             )?,
-            clock: self.choice(
-                &t,
+            clock: t.choice(
                 "clock",
                 dp.clock,
                 &[
@@ -869,9 +716,7 @@ impl Reader<'_> {
             )?,
         };
 
-        let t = self.tab(
-            root,
-            "",
+        let t = top.section(
             "dynamics",
             &[
                 "feedback",
@@ -883,17 +728,14 @@ impl Reader<'_> {
         )?;
         let dd = &d.dynamics;
         let dynamics = DynamicsConfig {
-            feedback: self.bool(&t, "feedback", dd.feedback)?,
-            delay_compensation: self.bool(&t, "delay_compensation", dd.delay_compensation)?,
-            kp_per_s2: self.f64_in(&t, "kp_per_s2", dd.kp_per_s2, 0.0, 1.0e7, false)?,
-            kd_per_s: self.f64_in(&t, "kd_per_s", dd.kd_per_s, 0.0, 1.0e5, false)?,
-            torque_slew_ms: self.f64_in(
-                &t,
+            feedback: t.bool_or("feedback", dd.feedback)?,
+            delay_compensation: t.bool_or("delay_compensation", dd.delay_compensation)?,
+            kp_per_s2: t.number_in("kp_per_s2", dd.kp_per_s2, Range::closed(0.0, 1.0e7))?,
+            kd_per_s: t.number_in("kd_per_s", dd.kd_per_s, Range::closed(0.0, 1.0e5))?,
+            torque_slew_ms: t.number_in(
                 "torque_slew_ms",
                 dd.torque_slew_ms,
-                0.0,
-                10_000.0,
-                false,
+                Range::closed(0.0, 10_000.0),
             )?,
         };
         // Discrete stability of the computed-torque loop at this rate (one-period delay).
@@ -907,9 +749,7 @@ impl Reader<'_> {
             ));
         }
 
-        let t = self.tab(
-            root,
-            "",
+        let t = top.section(
             "actuator",
             &[
                 "backend",
@@ -921,8 +761,8 @@ impl Reader<'_> {
             ],
         )?;
         let da = &d.actuator;
-        let backend = self.choice(&t, "backend", da.backend, &[("sim", BackendKind::Sim)])?;
-        let command = match self.get(&t, "command") {
+        let backend = t.choice("backend", da.backend, &[("sim", BackendKind::Sim)])?;
+        let command = match t.get("command") {
             None => None,
             Some(Value::Array(items)) => {
                 let mut out = Vec::with_capacity(items.len());
@@ -944,21 +784,22 @@ impl Reader<'_> {
             }
             Some(_) => return Err(self.err("actuator.command", "expected an array of strings")),
         };
-        let hold_kp_per_s2 =
-            self.f64_in(&t, "hold_kp_per_s2", da.hold_kp_per_s2, 0.0, 1.0e7, false)?;
-        let hold_kd_per_s = self.f64_in(&t, "hold_kd_per_s", da.hold_kd_per_s, 0.0, 1.0e5, true)?;
-        let torque_slope_ms = self.f64_in(
-            &t,
+        let hold_kp_per_s2 = t.number_in(
+            "hold_kp_per_s2",
+            da.hold_kp_per_s2,
+            Range::closed(0.0, 1.0e7),
+        )?;
+        let hold_kd_per_s = t.number_in(
+            "hold_kd_per_s",
+            da.hold_kd_per_s,
+            Range::left_open(0.0, 1.0e5),
+        )?;
+        let torque_slope_ms = t.number_in(
             "torque_slope_ms",
             da.torque_slope_ms,
-            0.0,
-            10_000.0,
-            false,
+            Range::closed(0.0, 10_000.0),
         )?;
-        let empty = Table::new();
-        let s = self.tab(
-            t.table.unwrap_or(&empty),
-            "actuator",
+        let s = t.section(
             "sim",
             &[
                 "mass_scale",
@@ -973,7 +814,7 @@ impl Reader<'_> {
             ],
         )?;
         let ds = &da.sim;
-        let initial_q_deg = match self.get(&s, "initial_q_deg") {
+        let initial_q_deg = match s.get("initial_q_deg") {
             None => None,
             Some(Value::Array(items)) => {
                 if items.is_empty() || items.len() > 8 {
@@ -981,16 +822,7 @@ impl Reader<'_> {
                 }
                 let mut out = Vec::with_capacity(items.len());
                 for (i, it) in items.iter().enumerate() {
-                    let k = format!("actuator.sim.initial_q_deg[{i}]");
-                    let v = match it {
-                        Value::Float(v) => *v,
-                        Value::Integer(v) => *v as f64,
-                        _ => return Err(self.err(&k, "expected a number")),
-                    };
-                    if !v.is_finite() {
-                        return Err(self.err(&k, format!("{v} is not a finite number")));
-                    }
-                    out.push(v);
+                    out.push(s.number_of(it, format!("actuator.sim.initial_q_deg[{i}]"))?);
                 }
                 Some(out)
             }
@@ -999,41 +831,28 @@ impl Reader<'_> {
             }
         };
         let sim = SimConfig {
-            mass_scale: self.f64_in(&s, "mass_scale", ds.mass_scale, 0.1, 10.0, false)?,
-            viscous_friction_nms: self.f64_in(
-                &s,
+            mass_scale: s.number_in("mass_scale", ds.mass_scale, Range::closed(0.1, 10.0))?,
+            viscous_friction_nms: s.number_in(
                 "viscous_friction_nms",
                 ds.viscous_friction_nms,
-                0.0,
-                1.0e4,
-                false,
+                Range::closed(0.0, 1.0e4),
             )?,
-            coulomb_friction_nm: self.f64_in(
-                &s,
+            coulomb_friction_nm: s.number_in(
                 "coulomb_friction_nm",
                 ds.coulomb_friction_nm,
-                0.0,
-                1.0e4,
-                false,
+                Range::closed(0.0, 1.0e4),
             )?,
-            sensor_noise_rad: self.f64_in(
-                &s,
+            sensor_noise_rad: s.number_in(
                 "sensor_noise_rad",
                 ds.sensor_noise_rad,
-                0.0,
-                1.0,
-                false,
+                Range::closed(0.0, 1.0),
             )?,
-            sensor_noise_rad_s: self.f64_in(
-                &s,
+            sensor_noise_rad_s: s.number_in(
                 "sensor_noise_rad_s",
                 ds.sensor_noise_rad_s,
-                0.0,
-                10.0,
-                false,
+                Range::closed(0.0, 10.0),
             )?,
-            integrator: self.choice(
-                &s,
+            integrator: s.choice(
                 "integrator",
                 ds.integrator,
                 &[
@@ -1041,8 +860,8 @@ impl Reader<'_> {
                     ("semi_implicit_euler", Integrator::SemiImplicitEuler),
                 ],
             )?,
-            substeps: self.u64_in(&s, "substeps", ds.substeps as u64, 1, 1000)? as u32,
-            seed: self.u64_in(&s, "seed", ds.seed, 0, i64::MAX as u64)?,
+            substeps: s.integer_in("substeps", ds.substeps as u64, 1, 1000)? as u32,
+            seed: s.integer_in("seed", ds.seed, 0, i64::MAX as u64)?,
             initial_q_deg,
         };
         let actuator = ActuatorConfig {
@@ -1054,9 +873,7 @@ impl Reader<'_> {
             sim,
         };
 
-        let t = self.tab(
-            root,
-            "",
+        let t = top.section(
             "realtime",
             &[
                 "cpu_affinity",
@@ -1069,7 +886,7 @@ impl Reader<'_> {
             ],
         )?;
         let dr = &d.realtime;
-        let cpu_affinity = match self.get(&t, "cpu_affinity") {
+        let cpu_affinity = match t.get("cpu_affinity") {
             None => dr.cpu_affinity.clone(),
             Some(Value::Array(items)) => {
                 let mut out = Vec::with_capacity(items.len());
@@ -1092,31 +909,22 @@ impl Reader<'_> {
         };
         let realtime = RealtimeConfig {
             cpu_affinity,
-            pm_qos: self.bool(&t, "pm_qos", dr.pm_qos)?,
-            pm_qos_latency_us: self.u64_in(
-                &t,
+            pm_qos: t.bool_or("pm_qos", dr.pm_qos)?,
+            pm_qos_latency_us: t.integer_in(
                 "pm_qos_latency_us",
                 dr.pm_qos_latency_us as u64,
                 0,
                 1_000_000,
             )? as u32,
-            timer_slack_ns: self.u64_in(
-                &t,
-                "timer_slack_ns",
-                dr.timer_slack_ns,
-                0,
-                1_000_000_000,
-            )?,
-            sched_fifo_priority: self.u64_in(
-                &t,
+            timer_slack_ns: t.integer_in("timer_slack_ns", dr.timer_slack_ns, 0, 1_000_000_000)?,
+            sched_fifo_priority: t.integer_in(
                 "sched_fifo_priority",
                 dr.sched_fifo_priority as u64,
                 0,
                 99,
             )? as u32,
-            mlockall: self.bool(&t, "mlockall", dr.mlockall)?,
-            overrun: self.choice(
-                &t,
+            mlockall: t.bool_or("mlockall", dr.mlockall)?,
+            overrun: t.choice(
                 "overrun",
                 dr.overrun,
                 &[
@@ -1126,9 +934,7 @@ impl Reader<'_> {
             )?,
         };
 
-        let t = self.tab(
-            root,
-            "",
+        let t = top.section(
             "supervisor",
             &[
                 "ready_timeout_ms",
@@ -1140,24 +946,17 @@ impl Reader<'_> {
         )?;
         let dv = &d.supervisor;
         let supervisor = SupervisorConfig {
-            ready_timeout_ms: self.f64_in(
-                &t,
+            ready_timeout_ms: t.number_in(
                 "ready_timeout_ms",
                 dv.ready_timeout_ms,
-                0.0,
-                600_000.0,
-                true,
+                Range::left_open(0.0, 600_000.0),
             )?,
-            stop_timeout_ms: self.f64_in(
-                &t,
+            stop_timeout_ms: t.number_in(
                 "stop_timeout_ms",
                 dv.stop_timeout_ms,
-                0.0,
-                600_000.0,
-                true,
+                Range::left_open(0.0, 600_000.0),
             )?,
-            on_failure: self.choice(
-                &t,
+            on_failure: t.choice(
                 "on_failure",
                 dv.on_failure,
                 &[
@@ -1165,8 +964,8 @@ impl Reader<'_> {
                     ("stop_all", FailurePolicy::StopAll),
                 ],
             )?,
-            max_restarts: self.u64_in(&t, "max_restarts", dv.max_restarts as u64, 0, 1000)? as u32,
-            hung_ms: self.f64_in(&t, "hung_ms", dv.hung_ms, 0.0, 600_000.0, true)?,
+            max_restarts: t.integer_in("max_restarts", dv.max_restarts as u64, 0, 1000)? as u32,
+            hung_ms: t.number_in("hung_ms", dv.hung_ms, Range::left_open(0.0, 600_000.0))?,
         };
         if supervisor.hung_ms < 2.0 * status_period_ms {
             return Err(self.err(
@@ -1192,7 +991,7 @@ impl Reader<'_> {
             actuator,
             realtime,
             supervisor,
-            teleop: self.teleop(root, rate_hz)?,
+            teleop: self.teleop(&top, rate_hz)?,
         })
     }
 }

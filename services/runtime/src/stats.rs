@@ -1,14 +1,18 @@
 //! Counters that cost nothing per cycle: a latency histogram created up front
-//! (hdrhistogram, 1 ns .. 60 s, 3 significant digits, never resized), and process CPU
-//! time and resident memory read at the status rate without allocating.
+//! (hdrhistogram, 1 ns .. 60 s, 3 significant digits, never resized) with the exact sum
+//! of its samples, and process CPU time and resident memory read at the status rate
+//! without allocating.
 
 use hdrhistogram::Histogram;
-use microrobot_messages::LatencySummary;
+use microrobot_messages::{HopLatency, LatencySummary};
 
-/// A fixed-range latency histogram in ns. Recording never allocates.
+/// A fixed-range latency histogram in ns, and the exact sum of what it recorded (the
+/// histogram's own mean is bucketed; the sum keeps the means of consecutive hops
+/// adding up exactly). Recording never allocates.
 #[derive(Debug, Clone)]
 pub struct LatencyHistogram {
     hist: Histogram<u64>,
+    sum_ns: u64,
 }
 
 impl Default for LatencyHistogram {
@@ -25,13 +29,20 @@ impl LatencyHistogram {
             Err(_) => Histogram::new(3).unwrap_or_else(|_| unreachable_hist()),
         };
         hist.auto(false);
-        Self { hist }
+        Self { hist, sum_ns: 0 }
     }
 
-    /// Records one value (ns), clamped into the histogram's range.
+    /// Records one value (ns), clamped into the histogram's range (the sum takes the
+    /// value itself).
     #[inline]
     pub fn record(&mut self, ns: u64) {
         self.hist.saturating_record(ns.max(1));
+        self.sum_ns = self.sum_ns.saturating_add(ns);
+    }
+
+    /// The exact sum of the values recorded (ns).
+    pub fn sum_ns(&self) -> u64 {
+        self.sum_ns
     }
 
     /// Number of values recorded.
@@ -47,6 +58,7 @@ impl LatencyHistogram {
     /// Forgets every sample and keeps the buckets (no allocation).
     pub fn reset(&mut self) {
         self.hist.reset();
+        self.sum_ns = 0;
     }
 
     /// Every non-empty bucket as `(value_ns, count)`, ascending: the histogram to draw
@@ -70,6 +82,19 @@ impl LatencyHistogram {
             p999_ns: self.hist.value_at_quantile(0.999),
             p9999_ns: self.hist.value_at_quantile(0.9999),
             max_ns: self.hist.max(),
+        }
+    }
+
+    /// Count, exact sum and percentiles, as a status carries one hop (zeros when empty).
+    pub fn hop_latency(&self) -> HopLatency {
+        let l = self.summary();
+        HopLatency {
+            count: l.count,
+            sum_ns: self.sum_ns,
+            p50_ns: l.p50_ns,
+            p99_ns: l.p99_ns,
+            p999_ns: l.p999_ns,
+            max_ns: l.max_ns,
         }
     }
 }
@@ -180,9 +205,11 @@ mod tests {
         let mut h = LatencyHistogram::new();
         h.record(5_000);
         h.record(7_000);
+        assert_eq!(h.sum_ns(), 12_000);
         h.reset();
         assert!(h.is_empty());
         assert_eq!(h.summary().count, 0);
+        assert_eq!(h.hop_latency(), HopLatency::default());
         h.record(3_000);
         assert_eq!(h.summary().count, 1);
         assert!(h.summary().max_ns >= 3_000 && h.summary().max_ns < 3_010);

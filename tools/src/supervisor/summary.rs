@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use microrobot_messages::{
-    LatencySummary, LifecycleState, MAX_JOINTS, ProgramEnd, ProgramState, ServiceRole,
+    HopLatency, LatencySummary, LifecycleState, MAX_JOINTS, ProgramEnd, ProgramState, ServiceRole,
     ServiceStatus,
 };
 use serde::{Deserialize, Serialize};
@@ -21,6 +21,26 @@ pub struct Percentiles {
     pub p999: f64,
     pub p9999: f64,
     pub max: f64,
+    /// The exact mean, where the sender keeps the sum of its samples (absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mean: Option<f64>,
+}
+
+/// The exact mean in µs of `count` samples summing to `sum_ns`; `None` when there are
+/// none or the sender kept no sum (every sample is at least 1 ns, so a sum of 0 with
+/// samples means "not kept").
+fn mean_us(count: u64, sum_ns: u64) -> Option<f64> {
+    (count > 0 && sum_ns > 0).then(|| sum_ns as f64 / count as f64 / 1000.0)
+}
+
+impl Percentiles {
+    /// `l` with the exact mean of its samples, whose sum is `sum_ns`.
+    pub fn with_sum(l: &LatencySummary, sum_ns: u64) -> Self {
+        Self {
+            mean: mean_us(l.count, sum_ns),
+            ..Self::from(l)
+        }
+    }
 }
 
 impl From<&LatencySummary> for Percentiles {
@@ -33,6 +53,72 @@ impl From<&LatencySummary> for Percentiles {
             p999: us(l.p999_ns),
             p9999: us(l.p9999_ns),
             max: us(l.max_ns),
+            mean: None,
+        }
+    }
+}
+
+/// One hop of the latency budget in µs: count, percentiles and the exact mean.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+pub struct HopStats {
+    pub count: u64,
+    pub p50: f64,
+    pub p99: f64,
+    pub p999: f64,
+    pub max: f64,
+    /// Exact (from the sum of the samples); 0 when the hop has no sample.
+    pub mean: f64,
+}
+
+impl From<&HopLatency> for HopStats {
+    fn from(h: &HopLatency) -> Self {
+        let us = |ns: u64| ns as f64 / 1000.0;
+        Self {
+            count: h.count,
+            p50: us(h.p50_ns),
+            p99: us(h.p99_ns),
+            p999: us(h.p999_ns),
+            max: us(h.max_ns),
+            mean: mean_us(h.count, h.sum_ns).unwrap_or(0.0),
+        }
+    }
+}
+
+/// The pipeline's latency split by hop, as the services measure it in their control
+/// cycles (see `ServiceStatus::hops`), in chain order. Three hops make up the
+/// end-to-end latency (setpoint stamp → torque taken by the actuator), each sample of it
+/// exactly, so their means add up to its mean: `setpoint_to_dynamics_us`,
+/// `dynamics_compute_us` and `torque_to_actuator_us`. The other two sit beside it: the
+/// planner's wake-up → its setpoint sent (the setpoint's stamp, where the end-to-end
+/// latency starts, is taken at the start of its computation), and the actuator's plant
+/// step → its state sent.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+pub struct HopBudget {
+    /// Planner: wake-up for a tick → its setpoint sent.
+    pub planner_wake_to_setpoint_us: HopStats,
+    /// Setpoint stamp → the dynamics awake for it.
+    pub setpoint_to_dynamics_us: HopStats,
+    /// Dynamics awake → torque stamp (in lockstep, its wait for the measured state too).
+    pub dynamics_compute_us: HopStats,
+    /// Torque stamp → the actuator awake and holding it.
+    pub torque_to_actuator_us: HopStats,
+    /// Actuator: plant step (the backend's write and read) → its state sent.
+    pub actuator_step_to_state_us: HopStats,
+}
+
+impl HopBudget {
+    /// From the per-role totals' hops (planner, dynamics, actuator).
+    pub fn from_statuses(
+        planner: &ServiceStatus,
+        dynamics: &ServiceStatus,
+        actuator: &ServiceStatus,
+    ) -> Self {
+        Self {
+            planner_wake_to_setpoint_us: HopStats::from(&planner.hops[0]),
+            setpoint_to_dynamics_us: HopStats::from(&dynamics.hops[0]),
+            dynamics_compute_us: HopStats::from(&dynamics.hops[1]),
+            torque_to_actuator_us: HopStats::from(&actuator.hops[0]),
+            actuator_step_to_state_us: HopStats::from(&actuator.hops[1]),
         }
     }
 }
@@ -159,6 +245,9 @@ pub struct Summary {
     pub restarts: u32,
     /// Torque received by the actuator − publish time of its setpoint.
     pub e2e_latency_us: Percentiles,
+    /// The latency budget by hop (see [`HopBudget`]).
+    #[serde(default)]
+    pub hops: HopBudget,
     /// Planner wake-up − ideal tick time.
     pub planner_lateness_us: Percentiles,
     /// Per joint, its tracking error and peak effort keyed in its type's units.
@@ -239,6 +328,15 @@ pub fn fold(acc: &mut ServiceStatus, s: &ServiceStatus) {
         acc.estop_latency_ns = s.estop_latency_ns;
     }
     acc.estop_latency_max_ns = acc.estop_latency_max_ns.max(s.estop_latency_max_ns);
+    acc.latency_sum_ns = acc.latency_sum_ns.saturating_add(s.latency_sum_ns);
+    for (a, b) in acc.hops.iter_mut().zip(&s.hops) {
+        a.count += b.count;
+        a.sum_ns = a.sum_ns.saturating_add(b.sum_ns);
+        a.p50_ns = a.p50_ns.max(b.p50_ns);
+        a.p99_ns = a.p99_ns.max(b.p99_ns);
+        a.p999_ns = a.p999_ns.max(b.p999_ns);
+        a.max_ns = a.max_ns.max(b.max_ns);
+    }
     let (a, b) = (&mut acc.latency, &s.latency);
     a.count += b.count;
     a.p50_ns = a.p50_ns.max(b.p50_ns);
@@ -333,7 +431,7 @@ impl Summary {
                     cpu_time_ms: st.cpu_time_ms as u64,
                     cpu_percent: percent_of(st.cpu_time_ms as f64, facts.wall_time_s),
                     rss_kib: st.rss_kib,
-                    latency_us: Percentiles::from(&st.latency),
+                    latency_us: Percentiles::with_sum(&st.latency, st.latency_sum_ns),
                 },
             );
         }
@@ -370,8 +468,9 @@ impl Summary {
             stale_cycles: sum(|s| s.stale_cycles),
             faults: sum(|s| s.faults),
             restarts: restarts.iter().sum(),
-            e2e_latency_us: Percentiles::from(&actuator.latency),
-            planner_lateness_us: Percentiles::from(&planner.latency),
+            e2e_latency_us: Percentiles::with_sum(&actuator.latency, actuator.latency_sum_ns),
+            hops: HopBudget::from_statuses(&planner, &dynamics, &actuator),
+            planner_lateness_us: Percentiles::with_sum(&planner.latency, planner.latency_sum_ns),
             joints: (0..dof)
                 .map(|i| {
                     let (name, prismatic) = facts
@@ -401,6 +500,51 @@ impl Summary {
             services,
             floor: None,
             run_dir: facts.run_dir,
+        }
+    }
+
+    /// The latency budget by hop as a table: the hops inside the end-to-end latency
+    /// marked `+`, their total `=` the end-to-end row.
+    fn render_hops(&self, s: &mut String) {
+        let _ = writeln!(
+            s,
+            "  latency by hop (µs)                {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
+            "count", "p50", "p99", "p99.9", "max", "mean"
+        );
+        let h = &self.hops;
+        let e = &self.e2e_latency_us;
+        let e2e = HopStats {
+            count: e.count,
+            p50: e.p50,
+            p99: e.p99,
+            p999: e.p999,
+            max: e.max,
+            mean: e.mean.unwrap_or(0.0),
+        };
+        let rows = [
+            (
+                "  planner wake → setpoint sent",
+                &h.planner_wake_to_setpoint_us,
+            ),
+            ("+ setpoint → dynamics awake", &h.setpoint_to_dynamics_us),
+            ("+ dynamics compute → torque", &h.dynamics_compute_us),
+            ("+ torque → actuator received", &h.torque_to_actuator_us),
+            ("= end-to-end", &e2e),
+            ("  actuator step → state sent", &h.actuator_step_to_state_us),
+        ];
+        for (name, x) in rows {
+            let _ = writeln!(
+                s,
+                "    {name:<32} {:>9} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1}",
+                x.count, x.p50, x.p99, x.p999, x.max, x.mean
+            );
+        }
+        let untaken = h.dynamics_compute_us.count.saturating_sub(e.count);
+        if untaken > 0 {
+            let _ = writeln!(
+                s,
+                "    ({untaken} torque(s) the dynamics published were not taken by the actuator: in flight at the stop, lost or refused; the + rows count them, the end-to-end row does not)"
+            );
         }
     }
 
@@ -465,6 +609,7 @@ impl Summary {
             )
         };
         let _ = writeln!(s, "  end-to-end latency: {}", p(&self.e2e_latency_us));
+        self.render_hops(&mut s);
         let _ = writeln!(s, "  planner lateness:   {}", p(&self.planner_lateness_us));
         if let Some(f) = &self.floor {
             let _ = writeln!(
@@ -582,6 +727,56 @@ mod tests {
             joints: joints.iter().map(|(n, p)| (n.to_string(), *p)).collect(),
             run_dir: "/tmp".into(),
         }
+    }
+
+    #[test]
+    fn hops_are_summed_over_restarts_with_exact_means() {
+        let hop = |count, sum_ns, max_ns| HopLatency {
+            count,
+            sum_ns,
+            p50_ns: max_ns / 2,
+            p99_ns: max_ns,
+            p999_ns: max_ns,
+            max_ns,
+        };
+        let dynamics = ServiceStatus {
+            hops: [hop(2, 30_000, 20_000), hop(2, 10_000, 6_000)],
+            ..ServiceStatus::default()
+        };
+        let again = ServiceStatus {
+            hops: [hop(1, 3_000, 3_000), hop(1, 2_000, 2_000)],
+            ..dynamics
+        };
+        let mut acc = ServiceStatus::default();
+        fold(&mut acc, &dynamics);
+        fold(&mut acc, &again);
+        assert_eq!(acc.hops[0], hop(3, 33_000, 20_000));
+        let actuator = ServiceStatus {
+            latency: LatencySummary {
+                count: 3,
+                max_ns: 40_000,
+                ..LatencySummary::default()
+            },
+            latency_sum_ns: 60_000,
+            hops: [hop(3, 15_000, 9_000), HopLatency::default()],
+            ..ServiceStatus::default()
+        };
+        let totals = [None, Some(acc), Some(actuator)];
+        let exits = [String::new(), String::new(), String::new()];
+        let s = Summary::build(facts(&[("a", false)]), &totals, &[0, 1, 0], &exits);
+        let json = serde_json::to_value(&s).expect("json");
+        let h = &json["hops"];
+        assert_eq!(h["setpoint_to_dynamics_us"]["count"], 3);
+        assert_eq!(h["setpoint_to_dynamics_us"]["mean"], 11.0);
+        assert_eq!(h["dynamics_compute_us"]["mean"], 4.0);
+        assert_eq!(h["torque_to_actuator_us"]["mean"], 5.0);
+        assert_eq!(json["e2e_latency_us"]["mean"], 20.0);
+        // No sample: the hop is there with zeros.
+        assert_eq!(h["planner_wake_to_setpoint_us"]["count"], 0);
+        assert_eq!(h["actuator_step_to_state_us"]["mean"], 0.0);
+        let text = s.render();
+        assert!(text.contains("= end-to-end"), "{text}");
+        assert!(!text.contains("not taken"), "{text}");
     }
 
     #[test]

@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use toml::Table;
+use microrobot_keypath::{Range, Table as KeyTable};
 
 use super::{Reader, Res, fmt_f64};
 
@@ -55,10 +55,8 @@ impl Default for TeleopConfig {
 }
 
 impl Reader<'_> {
-    pub(super) fn teleop(&self, root: &Table, rate_hz: f64) -> Res<TeleopConfig> {
-        let t = self.tab(
-            root,
-            "",
+    pub(super) fn teleop(&self, top: &KeyTable<'_>, rate_hz: f64) -> Res<TeleopConfig> {
+        let t = top.section(
             "teleop",
             &[
                 "enabled",
@@ -75,7 +73,7 @@ impl Reader<'_> {
             ],
         )?;
         let d = TeleopConfig::default();
-        let frame_rpy = match self.get(&t, "frame_rpy_deg") {
+        let frame_rpy = match t.get("frame_rpy_deg") {
             None => d.frame_rpy,
             Some(toml::Value::Array(items)) if items.len() == 3 => {
                 let mut out = [0.0; 3];
@@ -102,7 +100,7 @@ impl Reader<'_> {
                 ));
             }
         };
-        let filter_order = self.u64_in(&t, "filter_order", d.filter_order as u64, 2, 8)? as u32;
+        let filter_order = t.integer_in("filter_order", d.filter_order as u64, 2, 8)? as u32;
         if !filter_order.is_multiple_of(2) {
             return Err(self.err(
                 "teleop.filter_order",
@@ -111,67 +109,46 @@ impl Reader<'_> {
         }
         let ms = 1e-3;
         Ok(TeleopConfig {
-            enabled: self.bool(&t, "enabled", d.enabled)?,
-            ratio: self.f64_in(&t, "ratio", d.ratio, 0.1, 100.0, false)?,
+            enabled: t.bool_or("enabled", d.enabled)?,
+            ratio: t.number_in("ratio", d.ratio, Range::closed(0.1, 100.0))?,
             frame_rpy,
             filter_order,
-            filter_cutoff_hz: self.f64_in(
-                &t,
+            filter_cutoff_hz: t.number_in(
                 "filter_cutoff_hz",
                 d.filter_cutoff_hz,
-                0.0,
-                0.45 * rate_hz,
-                true,
+                Range::left_open(0.0, 0.45 * rate_hz),
             )?,
-            max_tool_velocity: self.f64_in(
-                &t,
+            max_tool_velocity: t.number_in(
                 "max_tool_vel_mm_s",
                 d.max_tool_velocity / ms,
-                0.0,
-                10_000.0,
-                true,
+                Range::left_open(0.0, 10_000.0),
             )? * ms,
-            max_tool_acceleration: self.f64_in(
-                &t,
+            max_tool_acceleration: t.number_in(
                 "max_tool_acc_mm_s2",
                 d.max_tool_acceleration / ms,
-                0.0,
-                1.0e6,
-                true,
+                Range::left_open(0.0, 1.0e6),
             )? * ms,
-            master_timeout_ms: self.f64_in(
-                &t,
+            master_timeout_ms: t.number_in(
                 "master_timeout_ms",
                 d.master_timeout_ms,
-                0.0,
-                60_000.0,
-                true,
+                Range::left_open(0.0, 60_000.0),
             )?,
-            singularity_sigma: self.f64_in(
-                &t,
+            singularity_sigma: t.number_in(
                 "singularity_sigma_mm",
                 d.singularity_sigma / ms,
-                0.0,
-                10_000.0,
-                false,
+                Range::closed(0.0, 10_000.0),
             )? * ms,
-            flip_threshold: self
-                .f64_in(
-                    &t,
+            flip_threshold: t
+                .number_in(
                     "flip_threshold_deg",
                     d.flip_threshold.to_degrees(),
-                    0.0,
-                    180.0,
-                    true,
+                    Range::left_open(0.0, 180.0),
                 )?
                 .to_radians(),
-            workspace_tolerance: self.f64_in(
-                &t,
+            workspace_tolerance: t.number_in(
                 "workspace_tolerance_mm",
                 d.workspace_tolerance / ms,
-                0.0,
-                100.0,
-                true,
+                Range::left_open(0.0, 100.0),
             )? * ms,
         })
     }

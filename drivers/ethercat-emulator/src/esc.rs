@@ -1,0 +1,539 @@
+//! One emulated SubDevice: the EtherCAT SubDevice Controller (ESC) memory with the
+//! registers a MainDevice uses (ETG.1000.4 clause 6 / table 31 register map), the SII
+//! EEPROM interface (0x0500-0x050F), the AL state machine (ETG.1000.6 6.4), the mailbox
+//! SyncManagers with CoE SDO (ETG.1000.6 5.6), FMMUs (0x0600) and the drive behind it.
+
+use crate::config::DriveConfig;
+use crate::drive::Drive;
+use crate::od::MappedObject;
+use crate::sii::{self, MBX_IN_START, MBX_OUT_START, MBX_SIZE};
+
+/// ESC memory: 4 KiB registers plus 4 KiB process RAM.
+pub(crate) const MEM_SIZE: usize = 0x2000;
+
+/// AL states (AL control 0x0120 / AL status 0x0130, bits 0-3).
+pub(crate) mod al {
+    pub const INIT: u8 = 1;
+    pub const PRE_OP: u8 = 2;
+    pub const BOOT: u8 = 3;
+    pub const SAFE_OP: u8 = 4;
+    pub const OP: u8 = 8;
+}
+
+/// AL status codes (0x0134, ETG.1000.6 table 11) the emulator reports.
+pub mod al_status_code {
+    /// Invalid requested state change.
+    pub const INVALID_STATE_CHANGE: u16 = 0x0011;
+    /// Unknown requested state.
+    pub const UNKNOWN_STATE: u16 = 0x0012;
+    /// Bootstrap not supported.
+    pub const BOOTSTRAP_NOT_SUPPORTED: u16 = 0x0013;
+    /// Invalid mailbox configuration (PRE-OP).
+    pub const INVALID_MAILBOX_CONFIG: u16 = 0x0016;
+    /// Sync manager watchdog: process data stopped (the default for a dropped drive).
+    pub const SM_WATCHDOG: u16 = 0x001B;
+    /// Invalid output configuration (SM2 does not match the RxPDO mapping).
+    pub const INVALID_OUTPUT_CONFIG: u16 = 0x001D;
+    /// Invalid input configuration (SM3 does not match the TxPDO mapping).
+    pub const INVALID_INPUT_CONFIG: u16 = 0x001E;
+}
+
+const REG_STATION_ADDRESS: u16 = 0x0010;
+const REG_DL_STATUS: u16 = 0x0110;
+const REG_AL_CONTROL: u16 = 0x0120;
+const REG_AL_STATUS: u16 = 0x0130;
+const REG_AL_STATUS_CODE: u16 = 0x0134;
+const REG_SII_CONTROL: u16 = 0x0502;
+const REG_SII_ADDRESS: u16 = 0x0504;
+const REG_SII_DATA: u16 = 0x0508;
+const REG_FMMU: u16 = 0x0600;
+const REG_SM: u16 = 0x0800;
+const REG_DC_PORT_TIMES: u16 = 0x0900;
+const REG_DC_SYSTEM_TIME: u16 = 0x0910;
+const REG_DC_RECEIVE_TIME: u16 = 0x0918;
+const REG_DC_OFFSET: u16 = 0x0920;
+
+/// A SyncManager channel as configured in 0x0800 + 8n (ETG.1000.4 table 58).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Sm {
+    pub start: u16,
+    pub len: u16,
+    pub control: u8,
+    pub enabled: bool,
+}
+
+impl Sm {
+    fn is_mailbox(&self) -> bool {
+        self.control & 0x03 == 0x02
+    }
+    /// The master writes this buffer.
+    fn master_writes(&self) -> bool {
+        self.control & 0x0C == 0x04
+    }
+    fn covers(&self, addr: u32) -> bool {
+        self.enabled
+            && self.len > 0
+            && addr >= u32::from(self.start)
+            && addr < u32::from(self.start) + u32::from(self.len)
+    }
+    fn last(&self) -> u32 {
+        u32::from(self.start) + u32::from(self.len) - 1
+    }
+}
+
+/// One emulated SubDevice.
+#[derive(Debug, Clone)]
+pub(crate) struct SubDevice {
+    mem: Vec<u8>,
+    pub sii: Vec<u8>,
+    pub drive: Drive,
+    rx_layout: Vec<MappedObject>,
+    tx_layout: Vec<MappedObject>,
+}
+
+fn overlaps(addr: u32, len: usize, reg: u16, reg_len: u32) -> bool {
+    let end = addr + len as u32;
+    addr < u32::from(reg) + reg_len && end > u32::from(reg)
+}
+
+impl SubDevice {
+    pub fn new(cfg: &DriveConfig) -> SubDevice {
+        let drive = Drive::new(cfg);
+        let sii = sii::image(cfg, &drive.od);
+        let mut s = SubDevice {
+            mem: vec![0; MEM_SIZE],
+            sii,
+            drive,
+            rx_layout: Vec::new(),
+            tx_layout: Vec::new(),
+        };
+        // Type, revision, build; FMMUs, SMs, RAM size (KiB), ports 0 and 1 MII.
+        s.mem[0x0000] = 0x11;
+        s.mem[0x0002..0x0004].copy_from_slice(&1u16.to_le_bytes());
+        s.mem[0x0004] = 8;
+        s.mem[0x0005] = 8;
+        s.mem[0x0006] = 4;
+        s.mem[0x0007] = 0x0F;
+        // Support flags (0x0008): DC supported (bit 2), 64-bit DC (bit 3).
+        s.mem[0x0008..0x000A].copy_from_slice(&0x000Cu16.to_le_bytes());
+        s.set_al(al::INIT, false, 0);
+        s.set_port1_open(true);
+        s.mem[0x0502] = 0x40;
+        s
+    }
+
+    pub fn station_address(&self) -> u16 {
+        self.u16(REG_STATION_ADDRESS)
+    }
+
+    pub fn al_state(&self) -> u8 {
+        self.mem[REG_AL_STATUS as usize] & 0x0F
+    }
+
+    pub fn al_error(&self) -> bool {
+        self.mem[REG_AL_STATUS as usize] & 0x10 != 0
+    }
+
+    pub fn al_status_code(&self) -> u16 {
+        self.u16(REG_AL_STATUS_CODE)
+    }
+
+    fn u16(&self, reg: u16) -> u16 {
+        let r = usize::from(reg);
+        u16::from_le_bytes([self.mem[r], self.mem[r + 1]])
+    }
+
+    fn u64(&self, reg: u16) -> u64 {
+        let r = usize::from(reg);
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&self.mem[r..r + 8]);
+        u64::from_le_bytes(b)
+    }
+
+    fn put(&mut self, reg: u16, bytes: &[u8]) {
+        let r = usize::from(reg);
+        self.mem[r..r + bytes.len()].copy_from_slice(bytes);
+    }
+
+    /// DL status (0x0110): port 0 link and communication; port 1 link and
+    /// communication when a SubDevice follows, else its loop closed.
+    pub fn set_port1_open(&mut self, open: bool) {
+        let mut dl: u16 = 0x0001 | (1 << 4) | (1 << 9);
+        dl |= if open { (1 << 5) | (1 << 11) } else { 1 << 10 };
+        self.put(REG_DL_STATUS, &dl.to_le_bytes());
+    }
+
+    /// Sets AL status and status code.
+    pub fn set_al(&mut self, state: u8, error: bool, code: u16) {
+        self.mem[REG_AL_STATUS as usize] = state | if error { 0x10 } else { 0 };
+        self.put(REG_AL_STATUS_CODE, &code.to_le_bytes());
+    }
+
+    pub fn sm(&self, n: usize) -> Sm {
+        let b = usize::from(REG_SM) + 8 * n;
+        Sm {
+            start: u16::from_le_bytes([self.mem[b], self.mem[b + 1]]),
+            len: u16::from_le_bytes([self.mem[b + 2], self.mem[b + 3]]),
+            control: self.mem[b + 4],
+            enabled: self.mem[b + 6] & 0x01 != 0,
+        }
+    }
+
+    fn set_mailbox_full(&mut self, n: usize, full: bool) {
+        let b = usize::from(REG_SM) + 8 * n + 5;
+        if full {
+            self.mem[b] |= 0x08;
+        } else {
+            self.mem[b] &= !0x08;
+        }
+    }
+
+    fn mailbox_full(&self, n: usize) -> bool {
+        self.mem[usize::from(REG_SM) + 8 * n + 5] & 0x08 != 0
+    }
+
+    /// Which SyncManager (0-3) covers `addr`, if any.
+    fn sm_at(&self, addr: u32) -> Option<(usize, Sm)> {
+        (0..4)
+            .map(|n| (n, self.sm(n)))
+            .find(|(_, sm)| sm.covers(addr))
+    }
+
+    /// A physical read of `out.len()` bytes at `addr` (APRD/FPRD/BRD and the read half
+    /// of the RW and RMW commands); false if the ESC refuses it (an empty mailbox: no
+    /// working counter). `now_ns` is the local clock.
+    pub fn read(&mut self, addr: u16, out: &mut [u8], now_ns: u64) -> bool {
+        let a = u32::from(addr);
+        if a as usize + out.len() > MEM_SIZE {
+            return false;
+        }
+        if overlaps(a, out.len(), REG_DC_SYSTEM_TIME, 8) {
+            let offset = self.u64(REG_DC_OFFSET);
+            self.put(
+                REG_DC_SYSTEM_TIME,
+                &now_ns.wrapping_add(offset).to_le_bytes(),
+            );
+        }
+        let mut clear_full = None;
+        if let Some((n, sm)) = self.sm_at(a).filter(|(_, sm)| sm.is_mailbox()) {
+            if sm.master_writes() || !self.mailbox_full(n) {
+                return false;
+            }
+            if a + out.len() as u32 > sm.last() {
+                clear_full = Some(n);
+            }
+        }
+        let s = usize::from(addr);
+        out.copy_from_slice(&self.mem[s..s + out.len()]);
+        if let Some(n) = clear_full {
+            self.set_mailbox_full(n, false);
+        }
+        true
+    }
+
+    /// A physical write (APWR/FPWR/BWR and the write half of RW and RMW); false if
+    /// the ESC refuses it (a full mailbox). Read-only registers keep their value.
+    pub fn write(&mut self, addr: u16, data: &[u8], now_ns: u64) -> bool {
+        let a = u32::from(addr);
+        if a as usize + data.len() > MEM_SIZE {
+            return false;
+        }
+        let mut mailbox_written = None;
+        if let Some((n, sm)) = self.sm_at(a).filter(|(_, sm)| sm.is_mailbox()) {
+            if !sm.master_writes() || self.mailbox_full(n) {
+                return false;
+            }
+            if a + data.len() as u32 > sm.last() {
+                mailbox_written = Some(n);
+            }
+        }
+        for (i, &b) in data.iter().enumerate() {
+            let r = addr as usize + i;
+            if writable(r) {
+                self.mem[r] = b;
+            }
+        }
+        if overlaps(a, data.len(), REG_AL_CONTROL, 2) {
+            self.al_control_written();
+        }
+        if overlaps(a, data.len(), REG_SII_CONTROL, 2) {
+            self.sii_command();
+        }
+        if overlaps(a, data.len(), REG_DC_PORT_TIMES, 4) {
+            self.latch_receive_times(now_ns);
+        }
+        if overlaps(a, data.len(), REG_DC_SYSTEM_TIME, 8) && data.len() >= 8 {
+            // System time written (FRMW from the reference clock): take it over.
+            let mut b = [0u8; 8];
+            let off = (REG_DC_SYSTEM_TIME as usize).saturating_sub(addr as usize);
+            if let Some(src) = data.get(off..off + 8) {
+                b.copy_from_slice(src);
+                let offset = u64::from_le_bytes(b).wrapping_sub(now_ns);
+                self.put(REG_DC_OFFSET, &offset.to_le_bytes());
+            }
+        }
+        if let Some(n) = mailbox_written {
+            self.set_mailbox_full(n, true);
+            self.mailbox_request(n);
+        }
+        true
+    }
+
+    /// Latches the DC receive times (0x0900 port times, 0x0918 receive time of the
+    /// processing unit); `now_ns` is the frame's arrival at port 0. The return on port 1
+    /// is not timed (reported equal to port 0 plus 100 ns per later hop).
+    fn latch_receive_times(&mut self, now_ns: u64) {
+        self.put(REG_DC_PORT_TIMES, &(now_ns as u32).to_le_bytes());
+        self.put(REG_DC_RECEIVE_TIME, &now_ns.to_le_bytes());
+    }
+
+    /// Port 1 receive time, set by the chain that knows the hops after this device.
+    pub fn set_port1_time(&mut self, t_ns: u64) {
+        self.put(REG_DC_PORT_TIMES + 4, &(t_ns as u32).to_le_bytes());
+    }
+
+    /// SII EEPROM command (ETG.1000.4 6.4.3): read 8 bytes, or write one word.
+    fn sii_command(&mut self) {
+        let ctl = self.u16(REG_SII_CONTROL);
+        let word = usize::from(self.u16(REG_SII_ADDRESS));
+        if ctl & 0x0100 != 0 {
+            for i in 0..8 {
+                let b = self.sii.get(word * 2 + i).copied().unwrap_or(0xFF);
+                self.mem[REG_SII_DATA as usize + i] = b;
+            }
+        } else if ctl & 0x0200 != 0
+            && let Some(w) = self.sii.get_mut(word * 2..word * 2 + 2)
+        {
+            w.copy_from_slice(&self.mem[REG_SII_DATA as usize..REG_SII_DATA as usize + 2]);
+        }
+        // Done at once: not busy, no error; 8-byte reads (bit 6).
+        self.mem[REG_SII_CONTROL as usize] = 0x40 | (ctl as u8 & 0x01);
+        self.mem[REG_SII_CONTROL as usize + 1] = 0;
+    }
+
+    /// The AL state machine on a write of AL control (ETG.1000.6 6.4.1).
+    fn al_control_written(&mut self) {
+        use al_status_code as code;
+        let ctl = self.u16(REG_AL_CONTROL);
+        let requested = (ctl & 0x0F) as u8;
+        let ack = ctl & 0x10 != 0;
+        let current = self.al_state();
+        if self.al_error() && !ack {
+            return;
+        }
+        let result = match (current, requested) {
+            (_, al::INIT) => Ok(al::INIT),
+            (al::INIT, al::PRE_OP) => self.check_mailbox().map(|_| al::PRE_OP),
+            (al::PRE_OP | al::SAFE_OP | al::OP, al::PRE_OP) => Ok(al::PRE_OP),
+            (al::PRE_OP, al::SAFE_OP) => self.freeze_process_data().map(|_| al::SAFE_OP),
+            (al::SAFE_OP | al::OP, al::SAFE_OP) => Ok(al::SAFE_OP),
+            (al::SAFE_OP | al::OP, al::OP) => Ok(al::OP),
+            (_, al::BOOT) => Err(code::BOOTSTRAP_NOT_SUPPORTED),
+            (_, al::SAFE_OP | al::OP) => Err(code::INVALID_STATE_CHANGE),
+            _ => Err(code::UNKNOWN_STATE),
+        };
+        match result {
+            Ok(state) => {
+                if state == al::INIT {
+                    self.set_mailbox_full(0, false);
+                    self.set_mailbox_full(1, false);
+                }
+                self.set_al(state, false, 0);
+            }
+            Err(c) => self.set_al(current, true, c),
+        }
+    }
+
+    fn check_mailbox(&self) -> Result<(), u16> {
+        let (out, inp) = (self.sm(0), self.sm(1));
+        let ok = out.enabled
+            && inp.enabled
+            && out.start == MBX_OUT_START
+            && inp.start == MBX_IN_START
+            && out.len == MBX_SIZE
+            && inp.len == MBX_SIZE
+            && out.is_mailbox()
+            && out.master_writes()
+            && inp.is_mailbox()
+            && !inp.master_writes();
+        if ok {
+            Ok(())
+        } else {
+            Err(al_status_code::INVALID_MAILBOX_CONFIG)
+        }
+    }
+
+    /// PRE-OP to SAFE-OP: SM2/SM3 must match the PDO mapping (ETG.1000.6 6.4.2).
+    fn freeze_process_data(&mut self) -> Result<(), u16> {
+        let rx = self.drive.od.layout(true);
+        let tx = self.drive.od.layout(false);
+        let bytes =
+            |l: &[MappedObject]| l.iter().map(|m| u32::from(m.bits)).sum::<u32>().div_ceil(8);
+        let (sm2, sm3) = (self.sm(2), self.sm(3));
+        let fits = |sm: Sm, n: u32, writes: bool| {
+            if n == 0 {
+                !sm.enabled || sm.len == 0
+            } else {
+                sm.enabled
+                    && u32::from(sm.len) == n
+                    && !sm.is_mailbox()
+                    && sm.master_writes() == writes
+                    && u32::from(sm.start) + n <= MEM_SIZE as u32
+            }
+        };
+        if !fits(sm2, bytes(&rx), true) {
+            return Err(al_status_code::INVALID_OUTPUT_CONFIG);
+        }
+        if !fits(sm3, bytes(&tx), false) {
+            return Err(al_status_code::INVALID_INPUT_CONFIG);
+        }
+        self.rx_layout = rx;
+        self.tx_layout = tx;
+        Ok(())
+    }
+
+    /// A logical access (LRD/LWR/LRW) through the FMMUs; returns the working counter
+    /// increment: +1 if inputs were read, +1 (LWR) or +2 (LRW) if outputs were written.
+    pub fn logical(&mut self, laddr: u32, data: &mut [u8], read: bool, write: bool) -> u16 {
+        let (mut did_read, mut did_write) = (false, false);
+        let end = laddr as u64 + data.len() as u64;
+        for f in 0..8 {
+            let b = usize::from(REG_FMMU) + 16 * f;
+            let reg = &self.mem[b..b + 16];
+            if reg[12] & 0x01 == 0 {
+                continue;
+            }
+            let lstart = u64::from(u32::from_le_bytes([reg[0], reg[1], reg[2], reg[3]]));
+            let llen = u64::from(u16::from_le_bytes([reg[4], reg[5]]));
+            let pstart = u64::from(u16::from_le_bytes([reg[8], reg[9]]));
+            let kind = reg[11];
+            let lo = lstart.max(laddr as u64);
+            let hi = (lstart + llen).min(end);
+            if lo >= hi || pstart + (hi - lstart) > MEM_SIZE as u64 {
+                continue;
+            }
+            let p0 = (pstart + (lo - lstart)) as usize;
+            let d0 = (lo - laddr as u64) as usize;
+            let n = (hi - lo) as usize;
+            let gate = self.process_data_gate(p0 as u32);
+            if kind & 0x01 != 0 && read && gate.read {
+                data[d0..d0 + n].copy_from_slice(&self.mem[p0..p0 + n]);
+                did_read = true;
+            }
+            if kind & 0x02 != 0 && write && gate.write {
+                self.mem[p0..p0 + n].copy_from_slice(&data[d0..d0 + n]);
+                did_write = true;
+            }
+        }
+        u16::from(did_read)
+            + if did_write {
+                if read { 2 } else { 1 }
+            } else {
+                0
+            }
+    }
+
+    /// The application deactivates the process data SyncManagers outside their states:
+    /// inputs (SM3) in SAFE-OP and OP, outputs (SM2) in OP only.
+    fn process_data_gate(&self, paddr: u32) -> Gate {
+        match self.sm_at(paddr) {
+            Some((2, _)) => Gate {
+                read: false,
+                write: self.al_state() == al::OP,
+            },
+            Some((3, _)) => Gate {
+                read: matches!(self.al_state(), al::SAFE_OP | al::OP),
+                write: false,
+            },
+            Some(_) => Gate {
+                read: false,
+                write: false,
+            },
+            None => Gate {
+                read: true,
+                write: true,
+            },
+        }
+    }
+
+    /// Copies the outputs in SM2 into the RxPDO objects (in OP).
+    pub fn outputs_to_objects(&mut self) {
+        let mut off = usize::from(self.sm(2).start);
+        for m in self.rx_layout.clone() {
+            let n = usize::from(m.bits / 8);
+            if off + n <= MEM_SIZE {
+                let bytes = self.mem[off..off + n].to_vec();
+                self.drive.od.set(m.index, m.sub, &bytes);
+            }
+            off += n;
+        }
+    }
+
+    /// Copies the TxPDO objects into SM3 (in SAFE-OP and OP).
+    pub fn objects_to_inputs(&mut self) {
+        let mut off = usize::from(self.sm(3).start);
+        for m in &self.tx_layout {
+            let n = usize::from(m.bits / 8);
+            if let Some(src) = self.drive.od.get(m.index, m.sub)
+                && off + n <= MEM_SIZE
+                && src.len() >= n
+            {
+                self.mem[off..off + n].copy_from_slice(&src[..n]);
+            }
+            off += n;
+        }
+    }
+
+    /// Answers the request in the write mailbox (SM0) into the read mailbox (SM1).
+    fn mailbox_request(&mut self, n: usize) {
+        let out = self.sm(n);
+        self.set_mailbox_full(n, false);
+        if self.al_state() < al::PRE_OP {
+            return;
+        }
+        let start = usize::from(out.start);
+        let req = self.mem[start..start + usize::from(out.len)].to_vec();
+        let pre_op = self.al_state() == al::PRE_OP;
+        let Some(resp) = crate::coe::answer(&req, &mut self.drive.od, pre_op, MBX_SIZE as usize)
+        else {
+            return;
+        };
+        // The master may have rewritten SM1 since PRE-OP: answer only into RAM.
+        let inp = self.sm(1);
+        let s = usize::from(inp.start);
+        let len = usize::from(inp.len).min(MEM_SIZE.saturating_sub(s));
+        if len == 0 {
+            return;
+        }
+        self.mem[s..s + len].fill(0);
+        let n = resp.len().min(len);
+        self.mem[s..s + n].copy_from_slice(&resp[..n]);
+        self.set_mailbox_full(1, true);
+    }
+
+    /// Replaces the identity (SII words 0x0008-0x000B and object 0x1018).
+    pub fn set_identity(&mut self, vendor_id: u32, product_code: u32) {
+        sii::set_identity(&mut self.sii, vendor_id, product_code);
+        self.drive.set_identity(vendor_id, product_code);
+    }
+}
+
+/// Which process data directions an address takes now.
+struct Gate {
+    read: bool,
+    write: bool,
+}
+
+/// Whether the master may change a byte of ESC memory (the rest is read-only: device
+/// information, DL status, AL status, SyncManager status and PDI control, DC receive
+/// times).
+fn writable(r: usize) -> bool {
+    match r {
+        0x0000..=0x000F => false,
+        0x0110..=0x0111 => false,
+        0x0130..=0x0135 => false,
+        0x0800..=0x087F => !matches!((r - 0x0800) % 8, 5 | 7),
+        0x0900..=0x090F | 0x0918..=0x091F => false,
+        _ => r < MEM_SIZE,
+    }
+}
