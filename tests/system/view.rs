@@ -291,3 +291,24 @@ fn view_refuses_bad_arguments_and_an_instance_that_is_not_running() {
         assert!(out.stderr.contains(expected), "{args:?}: {}", out.stderr);
     }
 }
+
+#[test]
+fn view_without_its_binary_names_the_command_that_builds_it() {
+    // A CLI copied alone (not in a Cargo target directory, so nothing is built for it).
+    let dir = tempfile::tempdir().expect("tempdir");
+    let cli = dir.path().join("microrobot");
+    std::fs::copy(bin(), &cli).expect("copy microrobot");
+    let out = Command::new(&cli)
+        .args(["view", "--instance", "default"])
+        .stdin(Stdio::null())
+        .output()
+        .expect("run the copied microrobot");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("microrobot-view is missing"), "{err}");
+    assert!(
+        err.contains("build it with `cargo build --release -p microrobot-view`"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+}
