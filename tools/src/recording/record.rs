@@ -28,7 +28,9 @@ use microrobot_runtime::Shutdown;
 use serde::Serialize;
 use serde_json::Value;
 
-use super::tap::{BusTap, Payload, Received, check_instance, clock_offset_ns, run_config, wall_ns};
+use super::tap::{
+    BusTap, Payload, Received, Wake, check_instance, clock_offset_ns, run_config, wall_ns,
+};
 use super::{CONFIG_ATTACHMENT, TOPICS};
 
 /// Options of `microrobot record`.
@@ -503,7 +505,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
         // The writer only goes away after this thread is done; a send error cannot happen.
         let _ = tx.send(r);
     };
-    let result = tap.run(&shutdown, 100_000_000, &mut on, |now| {
+    let result = tap.run(&shutdown, Wake::OnEvents, 100_000_000, &mut on, |now| {
         if end.is_some_and(|e| now >= e) {
             return false;
         }

@@ -135,6 +135,17 @@ fn drain<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
     }
 }
 
+/// When [`BusTap::run`] wakes up to drain.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// On every notification of a stream, and on the timer: each message is taken as
+    /// soon as it is sent (the recorder, which must never let a queue overflow).
+    OnEvents,
+    /// On the timer only: the queues are drained in batches, with a fraction of the
+    /// wake-ups (a viewer, whose timer period is far below a queue's depth in time).
+    OnTimer,
+}
+
 /// The open ports of one instance's streams (see the module doc).
 pub struct BusTap {
     sp: Subscriber<ipc::Service, JointSetpoint, ()>,
@@ -176,24 +187,28 @@ impl BusTap {
         drain(&self.ss, |m| Payload::Status(Box::new(m)), on);
     }
 
-    /// Sleeps until a stream is notified, `period_ns` passes or `shutdown` is requested;
-    /// then drains every stream into `on` and asks `go_on` (with the time now) whether
-    /// to wait again. Returns once `shutdown` is requested or `go_on` says no (the
-    /// samples still queued then are the caller's to [`BusTap::drain`]).
+    /// Sleeps until a stream is notified (with `wake`: [`Wake::OnEvents`]), `period_ns`
+    /// passes or `shutdown` is requested; then drains every stream into `on` and asks
+    /// `go_on` (with the time now) whether to wait again. Returns once `shutdown` is
+    /// requested or `go_on` says no (the samples still queued then are the caller's to
+    /// [`BusTap::drain`]).
     pub fn run(
         &self,
         shutdown: &Shutdown,
+        wake: Wake,
         period_ns: u64,
         mut on: impl FnMut(Received),
         mut go_on: impl FnMut(u64) -> bool,
     ) -> Result<()> {
         let ws = waitset()?;
         let mut guards = Vec::new();
-        for l in &self.listeners {
-            guards.push(
-                ws.attach_notification(l)
-                    .map_err(|e| anyhow!("waitset: {e:?}"))?,
-            );
+        if wake == Wake::OnEvents {
+            for l in &self.listeners {
+                guards.push(
+                    ws.attach_notification(l)
+                        .map_err(|e| anyhow!("waitset: {e:?}"))?,
+                );
+            }
         }
         let timer = TimerFd::new().context("timerfd")?;
         timer
