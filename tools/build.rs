@@ -1,9 +1,10 @@
 //! Sets `MICROROBOT_BUILD_ID`: a hash of every source the binaries of this package are
 //! built from (the workspace manifest and lock file; the manifest and `src/` of
-//! `messages` and of each crate in `services/`; `services/bin/`; `tools/src/`). The
-//! CLI and the three service binaries embed it, and the supervisor refuses to start a
-//! service binary whose id differs from its own: one left over from an older build
-//! (e.g. after `cargo build --bin microrobot` alone) never runs in a pipeline.
+//! `messages` and of each crate in `services/`; `services/bin/`; `tools/src/`; the live
+//! view's package `tools/view/`). The CLI, the three service binaries and
+//! `microrobot-view` (through this package's library) embed it, and the CLI refuses to
+//! start one whose id differs from its own: one left over from an older build (e.g.
+//! after `cargo build --bin microrobot` alone) never runs.
 //!
 //! The hash is FNV-1a over each file's path and bytes in a sorted walk; it only has to
 //! tell builds apart, not resist an adversary.
@@ -19,6 +20,8 @@ fn main() {
         "messages/src",
         "services/bin",
         "tools/src",
+        "tools/view/Cargo.toml",
+        "tools/view/src",
     ]
     .map(String::from)
     .to_vec();

@@ -35,3 +35,4 @@ mod teleop;
 mod trust_boundary;
 mod urdf_robot_run;
 mod verdicts;
+mod view;

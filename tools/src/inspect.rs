@@ -160,7 +160,7 @@ fn seen_master(m: &MasterPose) -> Seen {
 }
 
 /// Refuses an instance with no live process (so nothing here creates its services).
-fn require_running(name: &str) -> Result<()> {
+pub fn require_running(name: &str) -> Result<()> {
     if instance::live_nodes(name).is_empty() {
         return Err(with_code(microrobot_runtime::exit_code::FAILURE)(anyhow!(
             "no pipeline instance `{name}` is running (see `microrobot list`)"

@@ -5,6 +5,7 @@
 //! separate processes: the supervisor starts the slim service binaries of the same build
 //! (`microrobot-planner`, `microrobot-dynamics`, `microrobot-actuator`) found beside this one.
 
+use std::ffi::OsString;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -62,6 +63,16 @@ enum Command {
     Study(study::StudyArgs),
     /// Record every stream of a running pipeline to an MCAP file (JSON, Foxglove-ready).
     Record(record::RecordArgs),
+    /// Serve a live Foxglove WebSocket view of a running pipeline (ws://127.0.0.1:8765 by
+    /// default; `microrobot view --help` for its options). Runs `microrobot-view`, found
+    /// beside this executable.
+    #[command(disable_help_flag = true)]
+    View {
+        /// The options of `microrobot-view` (`--instance NAME`, `--bind ADDR:PORT`,
+        /// `--transforms-hz HZ`, `--joints-hz HZ`).
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, num_args = 0..)]
+        args: Vec<OsString>,
+    },
     /// Write one CSV per topic of a recording.
     Export(export::ExportArgs),
     /// Draw torque, tracking error and latency of a recording as PNGs.
@@ -136,13 +147,22 @@ enum EvalCommand {
     Trajectory,
 }
 
+/// Replaces this process with `microrobot-view ARGS` of this build (see
+/// `supervisor::binaries`); returns only on failure.
+fn view(args: Vec<OsString>) -> anyhow::Result<()> {
+    use std::os::unix::process::CommandExt as _;
+    let path = microrobot_cli::supervisor::binaries::locate_view()?;
+    let err = std::process::Command::new(&path).args(args).exec();
+    Err(anyhow::anyhow!("cannot run {}: {err}", path.display()))
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // iceoryx2's own notices (e.g. "no config file was loaded") only on request.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     if !matches!(
         cli.command,
-        Command::Run(_) | Command::Soak(_) | Command::Record(_)
+        Command::Run(_) | Command::Soak(_) | Command::Record(_) | Command::View { .. }
     ) {
         // A closed stdout (`| head`) ends a printing command quietly, as it does `cat`,
         // instead of a panic in println!. The supervisor and the services keep Rust's
@@ -166,6 +186,7 @@ fn main() -> ExitCode {
         Command::TeleopReport(args) => teleop_report::main(args),
         Command::Study(args) => study::main(args),
         Command::Record(args) => record::main(args),
+        Command::View { args } => view(args),
         Command::Export(args) => export::main(args),
         Command::Plot(args) => plot::main(args),
         Command::Replay(args) => replay::main(args),

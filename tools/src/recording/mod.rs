@@ -24,6 +24,7 @@ pub mod plot;
 pub mod record;
 pub mod recover;
 pub mod replay;
+pub mod tap;
 pub mod viewer;
 
 use std::collections::BTreeMap;

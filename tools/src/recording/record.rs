@@ -1,7 +1,8 @@
 //! `microrobot record`: attaches to a pipeline instance and writes every stream to MCAP.
 //!
-//! The drain thread (this one) sleeps in an iceoryx2 WaitSet on the five event services,
-//! the shutdown eventfd and a 100 ms timerfd; on every wake-up it drains every listener
+//! The drain thread (this one) runs the bus tap ([`super::tap::BusTap`], shared with
+//! `microrobot view`): it sleeps in an iceoryx2 WaitSet on the event services, the
+//! shutdown eventfd and a 100 ms timerfd; on every wake-up it drains every listener
 //! and then every subscriber, and hands the copied payloads (with their receive time)
 //! to a writer thread over an unbounded channel, so JSON encoding and file I/O never
 //! hold up draining. The writer thread runs at a lower priority (nice +10).
@@ -18,22 +19,18 @@
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{BufWriter, Write as _};
-use std::os::unix::fs::OpenOptionsExt as _;
 use std::path::PathBuf;
 use std::sync::mpsc;
 
 use anyhow::{Context as _, Result, anyhow, bail, ensure};
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::*;
-use microrobot_messages::{
-    JointSetpoint, JointState, LifecycleState, MotionCommand, ServiceKind, ServiceStatus,
-    TorqueCommand, monotonic_ns, open_event, open_publish_subscribe, service_name,
-};
-use microrobot_runtime::{Shutdown, TimerFd, waitset};
+use microrobot_messages::{LifecycleState, monotonic_ns};
+use microrobot_runtime::Shutdown;
 use serde::Serialize;
 use serde_json::Value;
 
+use super::tap::{
+    BusTap, Payload, Received, Wake, check_instance, clock_offset_ns, run_config, wall_ns,
+};
 use super::{CONFIG_ATTACHMENT, TOPICS};
 
 /// Options of `microrobot record`.
@@ -65,8 +62,6 @@ pub struct RecordArgs {
 
 /// Period of the derived viewer channels by default (100 Hz).
 const VIEWER_PERIOD_NS: u64 = 10_000_000;
-/// How often the recorder looks for the run's config (the robot) until it has it.
-const VIEWER_RETRY_NS: u64 = 1_000_000_000;
 
 /// What the recorder reports at the end (one JSON line on stdout).
 #[derive(Debug, Clone, Default, Serialize)]
@@ -97,122 +92,6 @@ pub struct RecordSummary {
     pub bytes_per_s: f64,
 }
 
-/// One received payload (the status boxed: it is rare and several times larger than
-/// the cyclic payloads, which fill the writer's queue).
-#[derive(Clone)]
-enum Payload {
-    Setpoint(JointSetpoint),
-    Torque(TorqueCommand),
-    State(JointState),
-    Command(MotionCommand),
-    Status(Box<ServiceStatus>),
-}
-
-impl Payload {
-    fn topic(&self) -> usize {
-        match self {
-            Payload::Setpoint(_) => 0,
-            Payload::Torque(_) => 1,
-            Payload::State(_) => 2,
-            Payload::Command(_) => 3,
-            Payload::Status(_) => 4,
-        }
-    }
-
-    fn seq_and_stamp(&self) -> (u64, u64) {
-        match self {
-            Payload::Setpoint(m) => (m.header.seq, m.header.stamp_ns),
-            Payload::Torque(m) => (m.header.seq, m.header.stamp_ns),
-            Payload::State(m) => (m.header.seq, m.header.stamp_ns),
-            Payload::Command(m) => (m.seq, m.stamp_ns),
-            Payload::Status(m) => (m.seq, m.stamp_ns),
-        }
-    }
-
-    /// Whether the contract numbers this stream from 1 per publisher (every cyclic
-    /// stream; motion commands carry their sender's stamp as `seq`).
-    fn numbered_from_one(&self) -> bool {
-        !matches!(self, Payload::Command(_))
-    }
-
-    fn json(&self) -> serde_json::Value {
-        match self {
-            Payload::Setpoint(m) => super::setpoint_json(m),
-            Payload::Torque(m) => super::torque_json(m),
-            Payload::State(m) => super::state_json(m),
-            Payload::Command(m) => super::command_json(m),
-            Payload::Status(m) => super::status_json(m),
-        }
-    }
-}
-
-struct Received {
-    payload: Payload,
-    publisher: u128,
-    recv_ns: u64,
-}
-
-fn check_instance(name: &str) -> Result<()> {
-    ensure!(
-        (1..=64).contains(&name.len())
-            && name
-                .bytes()
-                .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-'),
-        "--instance `{name}`: must be 1 to 64 characters of [A-Za-z0-9_-]"
-    );
-    Ok(())
-}
-
-fn subscriber<T>(
-    node: &Node<ipc::Service>,
-    instance: &str,
-    kind: ServiceKind,
-) -> Result<Subscriber<ipc::Service, T, ()>>
-where
-    T: std::fmt::Debug + ZeroCopySend + 'static,
-{
-    open_publish_subscribe::<T>(node, instance, kind)?
-        .subscriber_builder()
-        .buffer_size(microrobot_messages::ports::qos::SUBSCRIBER_BUFFER)
-        .create()
-        .map_err(|e| anyhow!("{} subscriber: {e:?}", service_name(instance, kind)))
-}
-
-fn listener(
-    node: &Node<ipc::Service>,
-    instance: &str,
-    kind: ServiceKind,
-) -> Result<Listener<ipc::Service>> {
-    open_event(node, instance, kind)?
-        .listener_builder()
-        .create()
-        .map_err(|e| anyhow!("{} listener: {e:?}", service_name(instance, kind)))
-}
-
-/// Takes every waiting sample of `sub`; returns how many.
-fn drain<T: std::fmt::Debug + ZeroCopySend + Copy + 'static>(
-    sub: &Subscriber<ipc::Service, T, ()>,
-    wrap: fn(T) -> Payload,
-    tx: &mpsc::Sender<Received>,
-    on: &mut impl FnMut(&Payload),
-) -> usize {
-    let mut n = 0;
-    while let Ok(Some(s)) = sub.receive() {
-        let payload = wrap(*s);
-        let publisher = s.header().publisher_id().value();
-        drop(s);
-        on(&payload);
-        // The writer only goes away after this thread is done; a send error cannot happen.
-        let _ = tx.send(Received {
-            payload,
-            publisher,
-            recv_ns: monotonic_ns(),
-        });
-        n += 1;
-    }
-    n
-}
-
 /// Lowers the calling thread's priority (best effort).
 fn nice_this_thread(inc: i32) {
     // SAFETY: plain syscalls on the calling thread.
@@ -237,8 +116,8 @@ struct Writer {
     summary: RecordSummary,
     /// Stamp of the first message of the open chunk.
     chunk_start_ns: Option<u64>,
-    /// The viewer channels: ids (`transforms`, `joints`, `scene`), MCAP sequence numbers, the
-    /// run's robot (once its config is found), and when each was last derived.
+    /// The viewer channels: ids (`transforms`, `joints`, `scene`), MCAP sequence numbers,
+    /// and what derives them.
     derived: Derived,
     /// The services' log lines (`log`, `foxglove.Log`): channel id, sequence, the files.
     logs: (u16, u32, super::logs::LogTail),
@@ -247,13 +126,7 @@ struct Writer {
 struct Derived {
     channels: [u16; 3],
     sequence: [u32; 3],
-    viewer: Option<super::viewer::Viewer>,
-    /// Stamp of the last look for the run's config.
-    looked_ns: Option<u64>,
-    period_ns: u64,
-    last_state_ns: Option<u64>,
-    last_setpoint_ns: Option<u64>,
-    instance: String,
+    feed: super::viewer::Feed,
 }
 
 /// Writes one message on `(channel, sequence)` with log time `wall` (`CLOCK_REALTIME`)
@@ -275,12 +148,6 @@ fn put(
         data,
     )
     .with_context(|| format!("cannot write to {file}"))
-}
-
-/// `CLOCK_REALTIME` ns of the `CLOCK_MONOTONIC` stamp `mono`, given
-/// `realtime_minus_monotonic_ns` ([`clock_offset_ns`]), clamped to the log time's range.
-fn wall_ns(mono: u64, offset: i64) -> u64 {
-    (mono as i128 + offset as i128).clamp(0, u64::MAX as i128) as u64
 }
 
 /// Adds a JSON channel `topic` with its JSON schema `(name, schema)` to the recording
@@ -315,42 +182,6 @@ fn attach_config(
         data: data.into(),
     })
     .with_context(|| format!("cannot write to {file}"))
-}
-
-/// `CLOCK_REALTIME` − `CLOCK_MONOTONIC` in ns, read as a tight pair (the monotonic
-/// read between two realtime reads; the pair with the smallest gap of five).
-fn clock_offset_ns() -> i64 {
-    let realtime = || {
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos() as i64)
-    };
-    let mut best: Option<(i64, i64)> = None;
-    for _ in 0..5 {
-        let a = realtime();
-        let m = monotonic_ns() as i64;
-        let b = realtime();
-        let gap = b - a;
-        let offset = a + gap / 2 - m;
-        if best.is_none_or(|(g, _)| gap < g) {
-            best = Some((gap, offset));
-        }
-    }
-    best.map_or(0, |(_, o)| o)
-}
-
-/// The resolved config of `instance`'s run, from this user's private run directory,
-/// never through a symlink; `None` when there is none (yet).
-fn run_config(instance: &str) -> Option<Vec<u8>> {
-    let p = crate::supervisor::instance::run_file(instance, CONFIG_ATTACHMENT).ok()?;
-    let mut f = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)
-        .open(p)
-        .ok()?;
-    let mut data = Vec::new();
-    std::io::Read::read_to_end(&mut f, &mut data).ok()?;
-    Some(data)
 }
 
 impl Writer {
@@ -432,12 +263,14 @@ impl Writer {
             derived: Derived {
                 channels: derived_channels,
                 sequence: [0; 3],
-                viewer: None,
-                looked_ns: None,
-                period_ns: if args.full_rate { 0 } else { VIEWER_PERIOD_NS },
-                last_state_ns: None,
-                last_setpoint_ns: None,
-                instance: args.instance.clone(),
+                feed: super::viewer::Feed::new(
+                    &args.instance,
+                    super::viewer::Periods::every(if args.full_rate {
+                        0
+                    } else {
+                        VIEWER_PERIOD_NS
+                    }),
+                ),
             },
             logs: (log_channel, 0, super::logs::LogTail::new(&args.instance)),
         })
@@ -490,46 +323,7 @@ impl Writer {
     /// [`super::viewer`]); nothing until the run's config (the robot) is found.
     fn derive(&mut self, payload: &Payload, stamp: u64, wall: u64) -> Result<()> {
         let d = &mut self.derived;
-        let due = |last: Option<u64>| last.is_none_or(|t| stamp.saturating_sub(t) >= d.period_ns);
-        let wanted = match payload {
-            Payload::State(_) => due(d.last_state_ns),
-            Payload::Setpoint(_) => due(d.last_setpoint_ns),
-            _ => false,
-        };
-        if !wanted {
-            return Ok(());
-        }
-        if d.viewer.is_none()
-            && d.looked_ns
-                .is_none_or(|t| stamp.saturating_sub(t) >= VIEWER_RETRY_NS)
-        {
-            d.looked_ns = Some(stamp);
-            if let Some(text) = run_config(&d.instance) {
-                let text = String::from_utf8_lossy(&text).into_owned();
-                match super::viewer::Viewer::from_config_text(&text, CONFIG_ATTACHMENT) {
-                    Ok(v) => d.viewer = Some(v),
-                    Err(e) => eprintln!("warning: no transforms: {e:#}"),
-                }
-            }
-        }
-        let Some(viewer) = d.viewer.as_mut() else {
-            return Ok(());
-        };
-        let mut out: Vec<(usize, Value)> = Vec::new();
-        match payload {
-            Payload::State(m) => {
-                d.last_state_ns = Some(stamp);
-                out.extend(viewer.state_transforms(m, wall).map(|v| (0, v)));
-                out.extend(viewer.joints(m, wall).map(|v| (1, v)));
-                out.extend(viewer.scene(m, wall).map(|v| (2, v)));
-            }
-            Payload::Setpoint(m) => {
-                d.last_setpoint_ns = Some(stamp);
-                out.extend(viewer.setpoint_transforms(m, wall).map(|v| (0, v)));
-            }
-            _ => {}
-        }
-        for (i, v) in out {
+        for (i, v) in d.feed.derive(payload, stamp, wall) {
             let data = serde_json::to_vec(&v).context("JSON encoding")?;
             d.sequence[i] = d.sequence[i].wrapping_add(1);
             put(
@@ -613,39 +407,8 @@ pub fn main(args: RecordArgs) -> Result<()> {
         .install_signal_handler()
         .context("cannot install the SIGINT/SIGTERM handler")?;
 
-    let inst = args.instance.as_str();
-    let node_name = format!("microrobot-record.{inst}.{}", std::process::id());
-    let node = microrobot_runtime::node::named_node(&node_name)?;
-
     let writer = Writer::create(&args)?;
-    let sp = subscriber::<JointSetpoint>(&node, inst, ServiceKind::Setpoint)?;
-    let tq = subscriber::<TorqueCommand>(&node, inst, ServiceKind::Torque)?;
-    let st = subscriber::<JointState>(&node, inst, ServiceKind::State)?;
-    let cm = subscriber::<MotionCommand>(&node, inst, ServiceKind::Command)?;
-    let ss = subscriber::<ServiceStatus>(&node, inst, ServiceKind::Status)?;
-    let listeners = ServiceKind::ALL
-        .iter()
-        .map(|k| listener(&node, inst, *k))
-        .collect::<Result<Vec<_>>>()?;
-
-    let ws = waitset()?;
-    let mut guards = Vec::new();
-    for l in &listeners {
-        guards.push(
-            ws.attach_notification(l)
-                .map_err(|e| anyhow!("waitset: {e:?}"))?,
-        );
-    }
-    let timer = TimerFd::new().context("timerfd")?;
-    timer
-        .arm_absolute(monotonic_ns() + 100_000_000, 100_000_000)
-        .context("timerfd")?;
-    let _g_timer = ws
-        .attach_notification(&timer)
-        .map_err(|e| anyhow!("waitset: {e:?}"))?;
-    let _g_stop = ws
-        .attach_notification(&*shutdown)
-        .map_err(|e| anyhow!("waitset: {e:?}"))?;
+    let tap = BusTap::open(&args.instance, "microrobot-record")?;
 
     let (tx, rx) = mpsc::channel::<Received>();
     let instance = args.instance.clone();
@@ -727,7 +490,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
         .map(|d| start.saturating_add((d * 1e9) as u64));
     let finalized = std::cell::Cell::new([false; 3]);
     let mut settle_until: Option<u64> = None;
-    let mut on_payload = |p: &Payload| {
+    let on_payload = |p: &Payload| {
         if let Payload::Status(s) = p
             && s.lifecycle == LifecycleState::Finalized as u32
             && (1..=3).contains(&s.role)
@@ -737,38 +500,27 @@ pub fn main(args: RecordArgs) -> Result<()> {
             finalized.set(f);
         }
     };
-    let result = loop {
-        if let Err(e) = ws.wait_and_process_once(|_| CallbackProgression::Continue) {
-            break Err(anyhow!("waitset: {e:?}"));
-        }
-        for l in &listeners {
-            let _ = l.try_wait(|_| {});
-        }
-        drain(&sp, Payload::Setpoint, &tx, &mut on_payload);
-        drain(&tq, Payload::Torque, &tx, &mut on_payload);
-        drain(&st, Payload::State, &tx, &mut on_payload);
-        drain(&cm, Payload::Command, &tx, &mut on_payload);
-        drain(&ss, |m| Payload::Status(Box::new(m)), &tx, &mut on_payload);
-        let _ = timer.read_expirations();
-        let now = monotonic_ns();
-        if shutdown.is_requested() || end.is_some_and(|e| now >= e) {
-            break Ok(());
+    let mut on = |r: Received| {
+        on_payload(&r.payload);
+        // The writer only goes away after this thread is done; a send error cannot happen.
+        let _ = tx.send(r);
+    };
+    let result = tap.run(&shutdown, Wake::OnEvents, 100_000_000, &mut on, |now| {
+        if end.is_some_and(|e| now >= e) {
+            return false;
         }
         if args.until_finalized && finalized.get().iter().all(|f| *f) {
             // Give stragglers of the other streams one timer period to arrive.
             match settle_until {
                 None => settle_until = Some(now + 100_000_000),
-                Some(t) if now >= t => break Ok(()),
+                Some(t) if now >= t => return false,
                 Some(_) => {}
             }
         }
-    };
+        true
+    });
     // Whatever is still queued goes in too.
-    drain(&sp, Payload::Setpoint, &tx, &mut on_payload);
-    drain(&tq, Payload::Torque, &tx, &mut on_payload);
-    drain(&st, Payload::State, &tx, &mut on_payload);
-    drain(&cm, Payload::Command, &tx, &mut on_payload);
-    drain(&ss, |m| Payload::Status(Box::new(m)), &tx, &mut on_payload);
+    tap.drain(&mut on);
     drop(tx);
     let written = writer_thread
         .join()
@@ -806,6 +558,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use microrobot_messages::{JointSetpoint, MotionCommand};
 
     fn setpoint(seq: u64) -> Payload {
         let mut m = JointSetpoint::default();

@@ -5,7 +5,8 @@
 //! its joint origins to the tool, with a sphere at each joint) and `joints` (per joint
 //! name, position, velocity, effort), all derived from the recorded streams at a viewer's
 //! rate. Foxglove's 3D panel draws the frames and the arm, its plots the joints. Derived
-//! data: the readers here skip these channels.
+//! data: the readers here skip these channels. [`Feed`] derives them from the bus for
+//! both the recorder (into the file) and `microrobot view` (live, over WebSocket).
 
 use anyhow::{Context as _, Result};
 use microrobot_messages::{JointSetpoint, JointState, MAX_JOINTS};
@@ -119,6 +120,115 @@ fn transform(wall_ns: u64, child: &str, p: &Pose) -> Value {
         "translation": {"x": p.translation.x, "y": p.translation.y, "z": p.translation.z},
         "rotation": {"x": q.i, "y": q.j, "z": q.k, "w": q.w}
     })
+}
+
+/// Periods of the derived channels, ns (0: from every message).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Periods {
+    /// `transforms` (of the measured state and, apart, of the setpoint).
+    pub transforms_ns: u64,
+    /// `joints`.
+    pub joints_ns: u64,
+    /// `scene`.
+    pub scene_ns: u64,
+}
+
+impl Periods {
+    /// The same period for every channel.
+    pub fn every(period_ns: u64) -> Self {
+        Self {
+            transforms_ns: period_ns,
+            joints_ns: period_ns,
+            scene_ns: period_ns,
+        }
+    }
+}
+
+/// How often a [`Feed`] looks for the run's config (the robot) until it has it.
+const RETRY_NS: u64 = 1_000_000_000;
+
+/// Derives the viewer channels from an instance's states and setpoints, each channel
+/// decimated to its period (by the messages' stamps). The robot comes from the run's
+/// resolved config, looked for at most once a second until found, so a tap started
+/// before the pipeline gets its transforms once the pipeline is up.
+pub struct Feed {
+    instance: String,
+    periods: Periods,
+    viewer: Option<Viewer>,
+    looked_ns: Option<u64>,
+    /// Stamp of the last state transforms, setpoint transforms, joints, scene derived.
+    last: [Option<u64>; 4],
+}
+
+impl Feed {
+    /// A feed for `instance`'s run at `periods`.
+    pub fn new(instance: &str, periods: Periods) -> Self {
+        Self {
+            instance: instance.to_string(),
+            periods,
+            viewer: None,
+            looked_ns: None,
+            last: [None; 4],
+        }
+    }
+
+    /// The derived messages `payload` (stamped `stamp`, `CLOCK_MONOTONIC`; `wall` the
+    /// same instant on `CLOCK_REALTIME`) is due for, as (index into [`DERIVED_TOPICS`],
+    /// message); nothing until the run's robot is known.
+    pub fn derive(
+        &mut self,
+        payload: &super::tap::Payload,
+        stamp: u64,
+        wall: u64,
+    ) -> Vec<(usize, Value)> {
+        use super::tap::Payload;
+        let p = self.periods;
+        let due =
+            |last: Option<u64>, period: u64| last.is_none_or(|t| stamp.saturating_sub(t) >= period);
+        let wanted = match payload {
+            Payload::State(_) => [
+                due(self.last[0], p.transforms_ns),
+                false,
+                due(self.last[2], p.joints_ns),
+                due(self.last[3], p.scene_ns),
+            ],
+            Payload::Setpoint(_) => [false, due(self.last[1], p.transforms_ns), false, false],
+            _ => return Vec::new(),
+        };
+        if !wanted.iter().any(|w| *w) {
+            return Vec::new();
+        }
+        if self.viewer.is_none()
+            && self
+                .looked_ns
+                .is_none_or(|t| stamp.saturating_sub(t) >= RETRY_NS)
+        {
+            self.looked_ns = Some(stamp);
+            if let Some(text) = super::tap::run_config(&self.instance) {
+                let text = String::from_utf8_lossy(&text).into_owned();
+                match Viewer::from_config_text(&text, super::CONFIG_ATTACHMENT) {
+                    Ok(v) => self.viewer = Some(v),
+                    Err(e) => eprintln!("warning: no transforms: {e:#}"),
+                }
+            }
+        }
+        let Some(viewer) = self.viewer.as_mut() else {
+            return Vec::new();
+        };
+        let mut out = Vec::new();
+        for (k, _) in wanted.iter().enumerate().filter(|(_, w)| **w) {
+            self.last[k] = Some(stamp);
+            let msg = match (k, payload) {
+                (0, Payload::State(m)) => viewer.state_transforms(m, wall).map(|v| (0, v)),
+                (1, Payload::Setpoint(m)) => viewer.setpoint_transforms(m, wall).map(|v| (0, v)),
+                (2, Payload::State(m)) => viewer.joints(m, wall).map(|v| (1, v)),
+                (3, Payload::State(m)) => viewer.scene(m, wall).map(|v| (2, v)),
+                _ => None,
+            };
+            out.extend(msg);
+        }
+        out
+    }
 }
 
 impl Viewer {
@@ -267,6 +377,50 @@ mod tests {
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/robots/seed-arm.toml");
         let text = format!("robot = \"{}\"\n", robot.display());
         Viewer::from_config_text(&text, "test").expect("viewer")
+    }
+
+    /// Each derived channel keeps its own period, by the messages' stamps; setpoints give
+    /// their own transforms at the transforms' period; other streams give nothing.
+    #[test]
+    fn a_feed_decimates_each_channel_to_its_period() {
+        use super::super::tap::Payload;
+        let mut feed = Feed {
+            instance: "unit".into(),
+            periods: Periods {
+                transforms_ns: 10_000_000,
+                joints_ns: 5_000_000,
+                scene_ns: 20_000_000,
+            },
+            viewer: Some(viewer()),
+            looked_ns: None,
+            last: [None; 4],
+        };
+        let mut counts = [0usize; 3];
+        let mut setpoint_transforms = 0;
+        for ms in 0..40u64 {
+            let stamp = 1_000_000_000 + ms * 1_000_000;
+            let state = JointState {
+                dof: 6,
+                ..Default::default()
+            };
+            for (i, _) in feed.derive(&Payload::State(state), stamp, stamp) {
+                counts[i] += 1;
+            }
+            let setpoint = JointSetpoint {
+                dof: 6,
+                ..Default::default()
+            };
+            for (i, v) in feed.derive(&Payload::Setpoint(setpoint), stamp, stamp) {
+                assert_eq!(i, 0);
+                assert!(v.to_string().contains("cmd/tool"));
+                setpoint_transforms += 1;
+            }
+            let status = Payload::Status(Box::default());
+            assert!(feed.derive(&status, stamp, stamp).is_empty());
+        }
+        // 40 ms of 1 kHz states: transforms every 10 ms, joints every 5, scene every 20.
+        assert_eq!(counts, [4, 8, 2]);
+        assert_eq!(setpoint_transforms, 4);
     }
 
     #[test]

@@ -1,12 +1,14 @@
-//! Where the supervisor finds the three real-time service binaries (`microrobot-planner`,
-//! `microrobot-dynamics`, `microrobot-actuator`): beside the `microrobot` executable, and
-//! only if they come from the same build.
+//! Where the CLI finds the binaries of its own build that it runs: the three real-time
+//! service binaries (`microrobot-planner`, `microrobot-dynamics`, `microrobot-actuator`)
+//! and the live view (`microrobot-view`, a package of its own): beside the `microrobot`
+//! executable, and only if they come from the same build.
 //!
-//! Every binary of the `microrobot` package embeds the build id that `tools/build.rs`
+//! Every binary of the `microrobot` package (and `microrobot-view`, built from its
+//! library) embeds the build id that `tools/build.rs`
 //! computes from the sources (`microrobot-<role> --build-id` prints it). A service binary
 //! that is missing, or whose id is not this CLI's, is a binary of another build: when this
 //! process runs under `cargo run` (Cargo's environment for this package is set), Cargo is
-//! asked to build the services in the same profile and target directory, since `cargo run
+//! asked to build them in the same profile and target directory, since `cargo run
 //! --bin microrobot` builds only the CLI; otherwise it is an error that names the binary
 //! and the command that builds them all. (Under `cargo test` the services are always of
 //! the CLI's build: Cargo builds every binary of the package for the tests.)
@@ -33,40 +35,51 @@ pub struct ServiceBinaries {
     dir: PathBuf,
 }
 
-impl ServiceBinaries {
-    /// Finds and checks the service binaries beside the running executable, building them
-    /// first when this process runs under `cargo run` and they are missing or stale.
-    pub fn locate() -> anyhow::Result<Self> {
+/// Binaries of this build that the CLI runs from its own directory, and how to build them.
+struct Siblings {
+    /// What they are, for messages ("the service binaries").
+    what: &'static str,
+    /// Their file names.
+    names: Vec<String>,
+    /// Cargo's selection of them (after `cargo build`).
+    select: Vec<String>,
+    /// Whether `cargo build` in the repository (no selection) builds them too.
+    in_default_build: bool,
+    /// How the error names the build ("build them all") and a copy ("copy ... together").
+    build_phrase: &'static str,
+    copy_phrase: &'static str,
+}
+
+impl Siblings {
+    /// Finds and checks the binaries beside the running executable, building them first
+    /// when this process runs under `cargo run` and they are missing or stale; returns
+    /// their directory.
+    fn locate(&self) -> anyhow::Result<PathBuf> {
         let exe = std::env::current_exe().context("cannot find the microrobot executable")?;
         let dir = exe
             .parent()
             .context("the microrobot executable has no directory")?
             .to_path_buf();
-        let found = Self { dir };
-        let Err(stale) = found.check() else {
-            return Ok(found);
+        let Err(stale) = self.check(&dir) else {
+            return Ok(dir);
         };
-        let Some(cargo) = CargoBuild::of_parent(&found.dir) else {
-            anyhow::bail!("{stale:#}: {}", found.how_to_build());
+        let Some(cargo) = CargoBuild::of_parent(&dir, &self.select) else {
+            anyhow::bail!("{stale:#}: {}", self.how_to_build(&dir));
         };
         eprintln!(
-            "microrobot: {stale:#}; building the service binaries: {}",
+            "microrobot: {stale:#}; building {}: {}",
+            self.what,
             cargo.describe()
         );
-        cargo.run()?;
-        found.check()?;
-        Ok(found)
+        cargo.run(self.what)?;
+        self.check(&dir)?;
+        Ok(dir)
     }
 
-    /// The binary that runs `role`.
-    pub fn path(&self, role: ServiceRole) -> PathBuf {
-        self.dir.join(format!("microrobot-{}", role.name()))
-    }
-
-    /// Each binary exists and prints this build's id.
-    fn check(&self) -> anyhow::Result<()> {
-        for role in ROLES {
-            let path = self.path(role);
+    /// Each binary exists in `dir` and prints this build's id.
+    fn check(&self, dir: &Path) -> anyhow::Result<()> {
+        for name in &self.names {
+            let path = dir.join(name);
             let id = build_id_of(&path)?;
             anyhow::ensure!(
                 id == BUILD_ID,
@@ -77,28 +90,84 @@ impl ServiceBinaries {
         Ok(())
     }
 
-    /// What to run to build every binary of this build.
-    fn how_to_build(&self) -> String {
-        let in_target = self
-            .dir
+    /// What to run to build them for the CLI in `dir`.
+    fn how_to_build(&self, dir: &Path) -> String {
+        let in_target = dir
             .parent()
             .is_some_and(|t| t.join("CACHEDIR.TAG").is_file());
-        let cmd = match self.dir.file_name().and_then(|n| n.to_str()) {
-            Some("debug") if in_target => "cargo build".to_string(),
-            Some(p) if in_target && p != "release" => format!("cargo build --profile {p}"),
-            _ => "cargo build --release".to_string(),
+        let profile = match dir.file_name().and_then(|n| n.to_str()) {
+            Some("debug") if in_target => String::new(),
+            Some(p) if in_target && p != "release" => format!(" --profile {p}"),
+            _ => " --release".to_string(),
+        };
+        let select = if self.in_default_build {
+            String::new()
+        } else {
+            format!(" {}", self.select.join(" "))
         };
         format!(
-            "the services run as binaries of the same build beside microrobot ({}): build them \
-             all with `{cmd}` in the repository{}",
-            self.dir.display(),
-            if in_target {
-                ""
-            } else {
-                " and copy the four binaries together"
-            }
+            "{} must come from the same build, beside microrobot ({}): {} with \
+             `cargo build{profile}{select}` in the repository{}",
+            self.what,
+            dir.display(),
+            self.build_phrase,
+            if in_target { "" } else { self.copy_phrase }
         )
     }
+}
+
+impl ServiceBinaries {
+    fn siblings() -> Siblings {
+        let names: Vec<String> = ROLES
+            .iter()
+            .map(|r| format!("microrobot-{}", r.name()))
+            .collect();
+        Siblings {
+            what: "the service binaries",
+            select: names
+                .iter()
+                .flat_map(|n| ["--bin".to_string(), n.clone()])
+                .collect(),
+            names,
+            in_default_build: true,
+            build_phrase: "build them all",
+            copy_phrase: " and copy the four binaries together",
+        }
+    }
+
+    /// Finds and checks the service binaries beside the running executable, building them
+    /// first when this process runs under `cargo run` and they are missing or stale.
+    pub fn locate() -> anyhow::Result<Self> {
+        Ok(Self {
+            dir: Self::siblings().locate()?,
+        })
+    }
+
+    /// The binary that runs `role`.
+    pub fn path(&self, role: ServiceRole) -> PathBuf {
+        self.dir.join(format!("microrobot-{}", role.name()))
+    }
+}
+
+/// The live-view binary `microrobot view` execs.
+pub const VIEW_BINARY: &str = "microrobot-view";
+
+/// Finds and checks `microrobot-view` (package `microrobot-view`, kept out of this
+/// package so its WebSocket stack is no part of the CLI's build) beside the running
+/// executable, as [`ServiceBinaries::locate`] does for the services: under `cargo run`
+/// Cargo builds it first (`cargo build -p microrobot-view`, same profile and target
+/// directory); otherwise a missing or stale one is an error naming that command.
+pub fn locate_view() -> anyhow::Result<PathBuf> {
+    let dir = Siblings {
+        what: "the live view",
+        names: vec![VIEW_BINARY.to_string()],
+        select: vec!["-p".to_string(), VIEW_BINARY.to_string()],
+        in_default_build: false,
+        build_phrase: "build it",
+        copy_phrase: " and copy it beside microrobot",
+    }
+    .locate()?;
+    Ok(dir.join(VIEW_BINARY))
 }
 
 /// The id `path --build-id` prints.
@@ -119,7 +188,7 @@ fn build_id_of(path: &Path) -> anyhow::Result<String> {
     Ok(String::from_utf8_lossy(&out.stdout).trim().to_string())
 }
 
-/// `cargo build` of the three service binaries into the directory the CLI runs from.
+/// `cargo build` of sibling binaries into the directory the CLI runs from.
 struct CargoBuild {
     cargo: PathBuf,
     args: Vec<String>,
@@ -130,7 +199,7 @@ impl CargoBuild {
     /// run` execs it with `$CARGO`, `CARGO_PKG_NAME` and `CARGO_MANIFEST_PATH` set), with
     /// that manifest and the profile and target directory of `exe_dir`
     /// (`<target>/<profile>`); `None` otherwise.
-    fn of_parent(exe_dir: &Path) -> Option<Self> {
+    fn of_parent(exe_dir: &Path, select: &[String]) -> Option<Self> {
         let cargo = PathBuf::from(std::env::var_os("CARGO")?);
         let manifest = std::env::var_os("CARGO_MANIFEST_PATH")
             .map(PathBuf::from)
@@ -157,9 +226,7 @@ impl CargoBuild {
             "release" => args.push("--release".to_string()),
             p => args.extend(["--profile".to_string(), p.to_string()]),
         }
-        for role in ROLES {
-            args.extend(["--bin".to_string(), format!("microrobot-{}", role.name())]);
-        }
+        args.extend_from_slice(select);
         Some(Self { cargo, args })
     }
 
@@ -173,7 +240,7 @@ impl CargoBuild {
         format!("cargo {}", args.join(" "))
     }
 
-    fn run(&self) -> anyhow::Result<()> {
+    fn run(&self, what: &str) -> anyhow::Result<()> {
         let status = Command::new(&self.cargo)
             .args(&self.args)
             .stdin(Stdio::null())
@@ -181,7 +248,7 @@ impl CargoBuild {
             .with_context(|| format!("cannot run {}", self.cargo.display()))?;
         anyhow::ensure!(
             status.success(),
-            "building the service binaries failed ({status}): {}",
+            "building {what} failed ({status}): {}",
             self.describe()
         );
         Ok(())
