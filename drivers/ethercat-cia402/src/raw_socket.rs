@@ -171,7 +171,7 @@ impl Wake for EventFdWaker {
     }
 }
 
-/// The running transport; dropping it stops its thread (within [`POLL`]).
+/// The running transport; dropping it stops its thread (within one poll interval, `POLL`).
 pub struct RawSocketLink {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
