@@ -21,20 +21,21 @@ use ethercrab::{PduRx, PduTx};
 use crate::master::FrameGuard;
 
 /// The EtherCAT EtherType (ETG.1000.4 5.2).
-const ETHERCAT_ETHERTYPE: u16 = 0x88A4;
+pub const ETHERCAT_ETHERTYPE: u16 = 0x88A4;
 /// How often the threads look at the stop flag.
 const POLL: Duration = Duration::from_millis(10);
 
-/// An AF_PACKET raw socket for EtherCAT frames on one interface.
+/// An AF_PACKET raw socket for EtherCAT frames on one interface: the driver's bus and
+/// the emulated drive chain's end of a veth pair.
 #[derive(Debug)]
-struct RawSocket {
+pub struct RawSocket {
     fd: OwnedFd,
     ifindex: i32,
 }
 
 impl RawSocket {
     /// Opens the socket on `interface` (needs CAP_NET_RAW).
-    fn bind(interface: &str) -> io::Result<RawSocket> {
+    pub fn bind(interface: &str) -> io::Result<RawSocket> {
         let name = std::ffi::CString::new(interface)
             .map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "interface name has a NUL"))?;
         // SAFETY: a valid C string, alive for the call.
@@ -77,7 +78,7 @@ impl RawSocket {
 
     /// A frame from the wire if one is queued (frames this host sent are skipped as
     /// `Ok(Some(0))`); `Ok(None)` when none is.
-    fn try_recv(&self, buf: &mut [u8]) -> io::Result<Option<usize>> {
+    pub fn try_recv(&self, buf: &mut [u8]) -> io::Result<Option<usize>> {
         // SAFETY: an all-zero sockaddr_ll is valid; recvfrom fills it.
         let mut from: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
         let mut from_len = std::mem::size_of::<libc::sockaddr_ll>() as u32;
@@ -109,8 +110,33 @@ impl RawSocket {
         Ok(Some(n as usize))
     }
 
+    /// Waits up to `timeout` for a frame from the wire; `Ok(None)` on timeout or when
+    /// what arrived was a frame this host sent.
+    pub fn recv(&self, buf: &mut [u8], timeout: Duration) -> io::Result<Option<usize>> {
+        let mut pfd = libc::pollfd {
+            fd: self.fd.as_raw_fd(),
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+        // SAFETY: one valid pollfd.
+        let r = unsafe { libc::poll(&mut pfd, 1, ms) };
+        if r < 0 {
+            let e = io::Error::last_os_error();
+            return if e.kind() == io::ErrorKind::Interrupted {
+                Ok(None)
+            } else {
+                Err(e)
+            };
+        }
+        if r == 0 {
+            return Ok(None);
+        }
+        Ok(self.try_recv(buf)?.filter(|n| *n > 0))
+    }
+
     /// Sends one complete Ethernet frame.
-    fn send(&self, frame: &[u8]) -> io::Result<usize> {
+    pub fn send(&self, frame: &[u8]) -> io::Result<usize> {
         // SAFETY: an all-zero sockaddr_ll is valid; the fields used are set below.
         let mut to: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
         to.sll_family = libc::AF_PACKET as u16;

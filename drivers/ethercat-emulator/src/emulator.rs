@@ -13,8 +13,8 @@ use crate::esc::{SubDevice, al};
 use crate::fault::Fault;
 use crate::plant::{InertiaPlant, Plant, SeedArmPlant};
 
-/// EtherType of EtherCAT (ETG.1000.4 5.3.1).
-pub const ETHERCAT_ETHERTYPE: u16 = 0x88A4;
+/// The EtherCAT EtherType (ETG.1000.4 5.2), the driver's definition.
+pub use microrobot_ethercat_cia402::raw_socket::ETHERCAT_ETHERTYPE;
 /// Delay the emulated wire adds per SubDevice passed (for the DC receive times).
 const HOP_NS: u64 = 100;
 
