@@ -8,7 +8,8 @@ naming every mismatch: a field missing on either side, at another offset or of a
 size, another size, alignment or type name of a payload.
 
 Usage: python3 tools/python/check_layout.py [--json FILE]
-  (without --json it runs `cargo run -q -p microrobot-messages --example layout_json`)
+  (without --json it builds and runs the messages crate's `layout_json` example with the
+  workspace's feature set, the one `cargo test --workspace` builds, so nothing is rebuilt)
 """
 
 import argparse
@@ -85,6 +86,22 @@ def compare_qos():
     return errors
 
 
+def run_layout_example(repo):
+    """Builds `layout_json` for the whole workspace and returns what it prints.
+
+    `cargo run -p microrobot-messages` would resolve that crate's own, smaller feature set
+    and rebuild its dependencies; `--workspace` reuses what the test build compiled."""
+    built = subprocess.run(["cargo", "build", "-q", "--workspace", "--example", "layout_json",
+                            "--message-format=json"], cwd=repo, check=True,
+                           capture_output=True, text=True).stdout
+    exes = [m["executable"] for m in map(json.loads, built.splitlines())
+            if m.get("reason") == "compiler-artifact" and m["target"]["name"] == "layout_json"
+            and m.get("executable")]
+    if len(exes) != 1:
+        raise SystemExit(f"check_layout: cargo built {len(exes)} layout_json executables, expected 1")
+    return subprocess.run([exes[0]], check=True, capture_output=True, text=True).stdout
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", help="the Rust layout (default: run the messages crate's example)")
@@ -93,9 +110,7 @@ def main(argv=None):
         text = open(a.json).read()
     else:
         repo = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..")
-        text = subprocess.run(["cargo", "run", "-q", "-p", "microrobot-messages", "--example",
-                               "layout_json"], cwd=repo, check=True, capture_output=True,
-                              text=True).stdout
+        text = run_layout_example(repo)
     rust = json.loads(text)
     errors = compare(rust, mr.PAYLOADS) + compare_qos()
     for e in errors:
