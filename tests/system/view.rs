@@ -238,6 +238,7 @@ fn a_foxglove_client_sees_the_live_arm_and_a_stalled_one_costs_the_pipeline_noth
     // the pipeline loses nothing (the SDK drops that client's oldest queued messages).
     let stalled = client(&url, "stall", 9);
     let run = pipeline.finish(60.0);
+    let pipeline_ended = Instant::now();
     assert!(run.status.success(), "{}", run.stderr);
     let stalled = stalled.finish(30.0);
     assert!(
@@ -249,7 +250,9 @@ fn a_foxglove_client_sees_the_live_arm_and_a_stalled_one_costs_the_pipeline_noth
     let s = summary(&summary_path);
     assert_eq!(s["lost_messages"], 0, "a stalled viewer cost messages: {s}");
 
-    // Ctrl-C stops the view cleanly.
+    // The pipeline has ended: within a second and a half the view says so, and it keeps
+    // serving until Ctrl-C, which stops it cleanly.
+    std::thread::sleep(Duration::from_millis(1500).saturating_sub(pipeline_ended.elapsed()));
     let mut view = view;
     view.signal(libc::SIGINT);
     let t0 = Instant::now();
@@ -269,6 +272,10 @@ fn a_foxglove_client_sees_the_live_arm_and_a_stalled_one_costs_the_pipeline_noth
     }
     assert!(status.success(), "view: {status:?} {err}");
     assert!(err.contains("stopped"), "{err}");
+    assert!(
+        err.contains("has sent no status") && err.contains("still serving"),
+        "the view did not say that the pipeline stopped: {err}"
+    );
 }
 
 #[test]

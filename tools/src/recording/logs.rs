@@ -29,12 +29,17 @@ const ROLES: [&str; 3] = ["planner", "dynamics", "actuator"];
 /// recorder; the rest comes at the next poll).
 const MAX_READ: u64 = 1 << 20;
 
-/// `foxglove.Log`'s level enum.
+/// `foxglove.Log` level of an informational line.
+pub const LEVEL_INFO: u8 = 2;
+/// `foxglove.Log` level of a warning.
+pub const LEVEL_WARNING: u8 = 3;
+
+/// `foxglove.Log`'s level enum of a tracing level word (0: unknown).
 fn level_of(word: &str) -> u8 {
     match word {
         "TRACE" | "DEBUG" => 1,
-        "INFO" => 2,
-        "WARN" | "WARNING" => 3,
+        "INFO" => LEVEL_INFO,
+        "WARN" | "WARNING" => LEVEL_WARNING,
         "ERROR" => 4,
         _ => 0,
     }
@@ -79,15 +84,20 @@ pub fn parse_line(role: &str, line: &str, read_wall_ns: u64) -> (u64, Value) {
         Some((wall, level, target, message))
     });
     let (wall, level, file, message) = parsed.unwrap_or((read_wall_ns, 0, "", line));
-    let msg = json!({
+    (wall, message_at(wall, level, role, file, message))
+}
+
+/// A `foxglove.Log` message stamped `wall` (ns since the Unix epoch) from `name`, with
+/// `file` the line's source (its tracing target; empty when unknown).
+pub fn message_at(wall: u64, level: u8, name: &str, file: &str, message: &str) -> Value {
+    json!({
         "timestamp": {"sec": wall / 1_000_000_000, "nsec": wall % 1_000_000_000},
         "level": level,
         "message": message,
-        "name": role,
+        "name": name,
         "file": file,
         "line": 0
-    });
-    (wall, msg)
+    })
 }
 
 /// `YYYY-MM-DDTHH:MM:SS[.fraction]Z` (UTC, as tracing writes it) in ns since the Unix

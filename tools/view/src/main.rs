@@ -22,6 +22,7 @@ use foxglove::{ChannelBuilder, PartialMetadata, RawChannel, Schema, WebSocketSer
 use microrobot_cli::recording::tap::{self, BusTap, Payload, Received, Wake};
 use microrobot_cli::recording::viewer::{self, Feed, Periods};
 use microrobot_cli::recording::{self as recording, logs};
+use microrobot_messages::monotonic_ns;
 use microrobot_runtime::Shutdown;
 
 /// Options of `microrobot view`.
@@ -81,6 +82,11 @@ const DRAIN_PERIOD_NS: u64 = 10_000_000;
 /// How often the services' new log lines are read.
 const LOG_POLL_NS: u64 = 200_000_000;
 
+/// Without a status message for this long (every service sends one at 10 Hz) the
+/// pipeline has stopped or stalls: the view says so, keeps serving and says so again
+/// when the instance publishes anew (a new run under the same name).
+const QUIET_AFTER_NS: u64 = 1_000_000_000;
+
 /// A JSON channel on `ctx` with the recording's schema.
 fn channel(
     ctx: &Arc<foxglove::Context>,
@@ -113,6 +119,12 @@ fn send(ch: &RawChannel, msg: &serde_json::Value, wall: u64) {
             },
         );
     }
+}
+
+/// Says `text` on stderr and to the viewer (the `log` channel, as the view's own line).
+fn announce(log: &RawChannel, text: &str, level: u8, wall: u64) {
+    eprintln!("microrobot view: {text}");
+    send(log, &logs::message_at(wall, level, "view", "", text), wall);
 }
 
 /// Lowers the whole process's priority (best effort), before any thread starts: the
@@ -179,7 +191,14 @@ fn serve(args: Args) -> Result<()> {
         },
     );
     let mut last_raw: [Option<u64>; 3] = [None; 3];
+    // Monotonic time of the last status message seen, and whether the view has said the
+    // instance went quiet; shared by the two closures below.
+    let last_status = std::cell::Cell::new(monotonic_ns());
+    let quiet = std::cell::Cell::new(false);
     let on = |r: Received| {
+        if matches!(r.payload, Payload::Status(_)) {
+            last_status.set(monotonic_ns());
+        }
         let t = r.payload.topic();
         let (_, stamp) = r.payload.seq_and_stamp();
         let wall = tap::wall_ns(stamp, offset);
@@ -203,6 +222,21 @@ fn serve(args: Args) -> Result<()> {
     let mut tail = logs::LogTail::new(&args.instance);
     let mut logs_read_ns = 0;
     let result = tap.run(&shutdown, Wake::OnTimer, DRAIN_PERIOD_NS, on, |now| {
+        let silent_ns = now.saturating_sub(last_status.get());
+        if silent_ns >= QUIET_AFTER_NS && !quiet.get() {
+            quiet.set(true);
+            let text = format!(
+                "instance `{}` has sent no status for {:.1} s: the pipeline stopped or \
+                 stalls; still serving, waiting for it",
+                args.instance,
+                silent_ns as f64 * 1e-9
+            );
+            announce(&log, &text, logs::LEVEL_WARNING, tap::wall_ns(now, offset));
+        } else if silent_ns < QUIET_AFTER_NS && quiet.get() {
+            quiet.set(false);
+            let text = format!("instance `{}` is publishing again", args.instance);
+            announce(&log, &text, logs::LEVEL_INFO, tap::wall_ns(now, offset));
+        }
         if now.saturating_sub(logs_read_ns) >= LOG_POLL_NS {
             logs_read_ns = now;
             tail.poll(tap::wall_ns(now, offset), false, |wall, msg| {
