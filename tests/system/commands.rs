@@ -53,6 +53,29 @@ fn a_move_arriving_mid_motion_replans_without_a_jump() {
     let table: serde_json::Value = serde_json::from_str(top.stdout.trim()).expect("top JSON");
     let services = table["services"].as_array().expect("services");
     assert_eq!(services.len(), 3, "{table}");
+    // And the latency budget by hop: the three hops inside the end-to-end latency have
+    // counted the pipeline's messages, and their exact means add up to its mean (each
+    // service counts since its own start; top reads the statuses a few ms apart, so the
+    // sums agree to within a few samples' worth, not exactly).
+    let hops = &table["latency_by_hop"];
+    let mean = |h: &serde_json::Value| h["mean"].as_f64().expect("mean");
+    let inner = [
+        "setpoint_to_dynamics_us",
+        "dynamics_compute_us",
+        "torque_to_actuator_us",
+    ];
+    for h in inner {
+        assert!(
+            hops["hops"][h]["count"].as_u64().expect("count") > 100,
+            "{h}: {hops}"
+        );
+    }
+    let sum: f64 = inner.iter().map(|h| mean(&hops["hops"][*h])).sum();
+    let e2e = mean(&hops["end_to_end_us"]);
+    assert!(
+        e2e > 0.0 && (sum - e2e).abs() < 0.25 * e2e,
+        "hop means {sum} vs end-to-end {e2e}: {hops}"
+    );
 
     // An unreachable pose is refused by the planner, and `send` says so.
     let refused = send(&["move", "--pose", "10,10,10,1,0,0,0"]);

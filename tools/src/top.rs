@@ -4,7 +4,9 @@
 //! lifecycle, silence (a live process whose status stopped is shown as hung), the
 //! planner's e-stop latency; then what the arm does: the planner's activity (program,
 //! move, hold, e-stop, safe state, teleop) and program state, each joint's measured
-//! position and commanded torque, and the tool pose. It exits when the pipeline ends.
+//! position and commanded torque, and the tool pose; then the latency budget by hop (as
+//! in the run's summary, counted since each service started). It exits when the
+//! pipeline ends.
 
 use std::io::IsTerminal as _;
 use std::sync::Arc;
@@ -24,7 +26,7 @@ use serde::Serialize;
 
 use crate::supervisor::instance;
 use crate::supervisor::monitor::StatusMonitor;
-use crate::supervisor::summary::lifecycle_name;
+use crate::supervisor::summary::{HopBudget, HopStats, lifecycle_name};
 
 /// Options of `microrobot top`.
 #[derive(Debug, clap::Args)]
@@ -235,6 +237,18 @@ fn table(instance: &str, rows: &[Row], arm: Option<&Arm>) -> String {
     s
 }
 
+/// The latency budget by hop from the three services' latest statuses (each counts
+/// since its own start), with the end-to-end row; `None` until all three have reported.
+fn hop_budget(monitor: &StatusMonitor) -> Option<(HopBudget, HopStats)> {
+    let planner = monitor.get(ServiceRole::Planner)?;
+    let dynamics = monitor.get(ServiceRole::Dynamics)?;
+    let actuator = monitor.get(ServiceRole::Actuator)?;
+    Some((
+        HopBudget::from_statuses(planner, dynamics, actuator),
+        HopStats::end_to_end(actuator),
+    ))
+}
+
 /// The latest measured state and torque of an instance, and its robot (for joint names,
 /// units and the tool pose), read from the run's resolved config when there is one.
 struct ArmTap {
@@ -402,15 +416,24 @@ pub fn main(args: TopArgs) -> anyhow::Result<()> {
         arm.poll();
         let rows = rows(&monitor);
         let view = arm.arm(monitor.get(ServiceRole::Planner));
+        let hops = hop_budget(&monitor);
         if args.json {
-            let obj =
-                serde_json::json!({ "instance": args.instance, "services": rows, "arm": view });
+            let hops = hops
+                .map(|(budget, e2e)| serde_json::json!({ "hops": budget, "end_to_end_us": e2e }));
+            let obj = serde_json::json!({
+                "instance": args.instance, "services": rows, "arm": view, "latency_by_hop": hops
+            });
             println!("{obj}");
         } else {
             if clear {
                 print!("\x1b[H\x1b[2J");
             }
-            print!("{}", table(&args.instance, &rows, Some(&view)));
+            let mut out = table(&args.instance, &rows, Some(&view));
+            if let Some((budget, e2e)) = hops {
+                out.push_str("since each service started:\n");
+                budget.render(&e2e, &mut out);
+            }
+            print!("{out}");
         }
         if args.once || stop.load(Ordering::SeqCst) {
             return Ok(());

@@ -106,6 +106,23 @@ pub struct HopBudget {
     pub actuator_step_to_state_us: HopStats,
 }
 
+impl HopStats {
+    /// The end-to-end row of the budget from the actuator's status (its `latency`,
+    /// with the exact mean from `latency_sum_ns`).
+    pub fn end_to_end(actuator: &ServiceStatus) -> Self {
+        let l = &actuator.latency;
+        let us = |ns: u64| ns as f64 / 1000.0;
+        Self {
+            count: l.count,
+            p50: us(l.p50_ns),
+            p99: us(l.p99_ns),
+            p999: us(l.p999_ns),
+            max: us(l.max_ns),
+            mean: mean_us(l.count, actuator.latency_sum_ns).unwrap_or(0.0),
+        }
+    }
+}
+
 impl HopBudget {
     /// From the per-role totals' hops (planner, dynamics, actuator).
     pub fn from_statuses(
@@ -119,6 +136,39 @@ impl HopBudget {
             dynamics_compute_us: HopStats::from(&dynamics.hops[1]),
             torque_to_actuator_us: HopStats::from(&actuator.hops[0]),
             actuator_step_to_state_us: HopStats::from(&actuator.hops[1]),
+        }
+    }
+}
+
+impl HopBudget {
+    /// The budget as a table (µs): the hops inside the end-to-end latency marked `+`,
+    /// their total `=` the end-to-end row `e2e`, the other two hops beside them.
+    pub fn render(&self, e2e: &HopStats, s: &mut String) {
+        let _ = writeln!(
+            s,
+            "  latency by hop (µs)                {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
+            "count", "p50", "p99", "p99.9", "max", "mean"
+        );
+        let rows = [
+            (
+                "  planner wake → setpoint sent",
+                &self.planner_wake_to_setpoint_us,
+            ),
+            ("+ setpoint → dynamics awake", &self.setpoint_to_dynamics_us),
+            ("+ dynamics compute → torque", &self.dynamics_compute_us),
+            ("+ torque → actuator received", &self.torque_to_actuator_us),
+            ("= end-to-end", e2e),
+            (
+                "  actuator step → state sent",
+                &self.actuator_step_to_state_us,
+            ),
+        ];
+        for (name, x) in rows {
+            let _ = writeln!(
+                s,
+                "    {name:<32} {:>9} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1}",
+                x.count, x.p50, x.p99, x.p999, x.max, x.mean
+            );
         }
     }
 }
@@ -503,14 +553,8 @@ impl Summary {
         }
     }
 
-    /// The latency budget by hop as a table: the hops inside the end-to-end latency
-    /// marked `+`, their total `=` the end-to-end row.
+    /// The latency budget by hop as a table, with the run's end-to-end row.
     fn render_hops(&self, s: &mut String) {
-        let _ = writeln!(
-            s,
-            "  latency by hop (µs)                {:>9} {:>9} {:>9} {:>9} {:>9} {:>9}",
-            "count", "p50", "p99", "p99.9", "max", "mean"
-        );
         let h = &self.hops;
         let e = &self.e2e_latency_us;
         let e2e = HopStats {
@@ -521,24 +565,7 @@ impl Summary {
             max: e.max,
             mean: e.mean.unwrap_or(0.0),
         };
-        let rows = [
-            (
-                "  planner wake → setpoint sent",
-                &h.planner_wake_to_setpoint_us,
-            ),
-            ("+ setpoint → dynamics awake", &h.setpoint_to_dynamics_us),
-            ("+ dynamics compute → torque", &h.dynamics_compute_us),
-            ("+ torque → actuator received", &h.torque_to_actuator_us),
-            ("= end-to-end", &e2e),
-            ("  actuator step → state sent", &h.actuator_step_to_state_us),
-        ];
-        for (name, x) in rows {
-            let _ = writeln!(
-                s,
-                "    {name:<32} {:>9} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1}",
-                x.count, x.p50, x.p99, x.p999, x.max, x.mean
-            );
-        }
+        h.render(&e2e, s);
         let untaken = h.dynamics_compute_us.count.saturating_sub(e.count);
         if untaken > 0 {
             let _ = writeln!(
