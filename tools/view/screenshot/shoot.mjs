@@ -271,6 +271,12 @@ async function main() {
     let previous;
     for (;;) {
       await new Promise((r) => setTimeout(r, 3000));
+      // The viewer reports a file it cannot read as player problems (its Problems list).
+      const fatal = problems.filter((p) => p.startsWith("page error") || p.includes("Player problem"));
+      if (fatal.length > 0) {
+        writeFileSync(args.out + ".failed.png", Buffer.from(await page.screenshot({ type: "png" })));
+        fail(`the viewer reported problems (screen in ${args.out}.failed.png): ${JSON.stringify(problems.slice(0, 10))}`);
+      }
       png = Buffer.from(await page.screenshot({ type: "png" }));
       pixels = await armPixels(page, png, canvas3d);
       const steady = previous && Math.abs(previous.orange - pixels.orange) <= 2 && Math.abs(previous.blue - pixels.blue) <= 2;
