@@ -145,6 +145,15 @@ fn read_back(path: &Path) -> BTreeMap<String, Vec<Value>> {
         .expect("summary readable")
         .expect("the recorder finished the file (summary section)");
     assert!(!summary.chunk_indexes.is_empty(), "chunk indexes written");
+    // Every chunk holds messages: Foxglove Studio refuses a chunk without a message index
+    // (and its zero start time would stretch the file's time range back to 1970).
+    for c in &summary.chunk_indexes {
+        assert!(
+            c.message_index_length > 0 && c.message_start_time > 0,
+            "a chunk without messages at offset {}",
+            c.chunk_start_offset
+        );
+    }
     out
 }
 

@@ -195,27 +195,10 @@ impl Writer {
             .library(concat!("microrobot ", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::with_capacity(1 << 20, file))
             .with_context(|| format!("cannot start MCAP file {}", path.display()))?;
-        let mut meta = BTreeMap::new();
-        meta.insert("instance".to_string(), args.instance.clone());
-        let mut channels = [0u16; 5];
-        for (i, topic) in TOPICS.iter().enumerate() {
-            let (name, schema) = super::schema(topic)?;
-            channels[i] = add_channel(&mut mcap, path, (topic, name, &schema), &meta)?;
-        }
-        let mut derived_channels = [0u16; 3];
-        for (i, (topic, name, schema)) in super::viewer::channels().into_iter().enumerate() {
-            derived_channels[i] = add_channel(&mut mcap, path, (topic, name, &schema), &meta)?;
-        }
-        let log_channel = add_channel(
-            &mut mcap,
-            path,
-            (
-                super::logs::TOPIC,
-                super::logs::SCHEMA_NAME,
-                &super::logs::schema(),
-            ),
-            &meta,
-        )?;
+        // Metadata and attachments are written between chunks, so each one closes the
+        // chunk open before it: written ahead of the schemas and channels, they leave no
+        // chunk without messages (whose zero time range and missing message index
+        // Foxglove Studio refuses).
         let offset = clock_offset_ns();
         let clocks = BTreeMap::from([
             (
@@ -248,6 +231,27 @@ impl Writer {
             attach_config(&mut mcap, &summary.file, offset, data)?;
             summary.config_attached = true;
         }
+        let mut meta = BTreeMap::new();
+        meta.insert("instance".to_string(), args.instance.clone());
+        let mut channels = [0u16; 5];
+        for (i, topic) in TOPICS.iter().enumerate() {
+            let (name, schema) = super::schema(topic)?;
+            channels[i] = add_channel(&mut mcap, path, (topic, name, &schema), &meta)?;
+        }
+        let mut derived_channels = [0u16; 3];
+        for (i, (topic, name, schema)) in super::viewer::channels().into_iter().enumerate() {
+            derived_channels[i] = add_channel(&mut mcap, path, (topic, name, &schema), &meta)?;
+        }
+        let log_channel = add_channel(
+            &mut mcap,
+            path,
+            (
+                super::logs::TOPIC,
+                super::logs::SCHEMA_NAME,
+                &super::logs::schema(),
+            ),
+            &meta,
+        )?;
         for t in TOPICS {
             summary.messages.insert(t.to_string(), 0);
             summary.gaps.insert(t.to_string(), 0);

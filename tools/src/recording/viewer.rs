@@ -53,7 +53,10 @@ pub fn channels() -> [(&'static str, &'static str, Value); 3] {
         },
         "required": ["timestamp", "name", "position", "velocity", "effort"]
     });
-    let objects = json!({"type": "array", "items": {"type": "object"}});
+    // Items are objects of any shape; `properties` is spelled out (empty) because
+    // Foxglove Studio's JSON Schema reader walks it on every object and rejects the
+    // whole channel without it.
+    let objects = json!({"type": "array", "items": {"type": "object", "properties": {}}});
     let entity = json!({
         "title": "foxglove.SceneEntity",
         "type": "object",
