@@ -14,9 +14,17 @@ use microrobot_ethercat_emulator::{ChainConfig, Emulator, Fault as Inject, InPro
 const JOINTS: [&str; 6] = ["j1", "j2", "j3", "j4", "j5", "j6"];
 
 /// The example drive file with its first `n` axes and `rated_j1` as joint 1's rated
-/// torque.
+/// torque. The drives' watchdog is 1 s (the example's 10 ms would expire whenever the
+/// loaded test machine deschedules the test thread between two cycles).
 fn drive_file(n: usize, rated_j1: f64) -> DriveFile {
-    let text = include_str!("../example.drive.toml");
+    drive_file_with_watchdog(n, rated_j1, 1000)
+}
+
+fn drive_file_with_watchdog(n: usize, rated_j1: f64, watchdog_ms: u32) -> DriveFile {
+    let text = include_str!("../example.drive.toml").replace(
+        "drive_watchdog_ms = 10",
+        &format!("drive_watchdog_ms = {watchdog_ms}"),
+    );
     let mut parts = text.split("\n[[axis]]\n");
     let mut out = parts.next().expect("bus table").to_string();
     for (i, p) in parts.take(n).enumerate() {
@@ -166,6 +174,44 @@ fn a_drive_leaving_op_is_its_joint_with_the_al_status_code_and_a_reset_brings_th
     b.on_activate().expect("activate again");
     assert_eq!(e.drive(1).expect("d1").al_state, 8);
     assert!(cycle(&mut b, &JointVector::zeros()).is_ok());
+}
+
+/// The master stops exchanging (its process died, or hangs): each drive's own process
+/// data watchdog (ESC 0x0420 as the drive file arms it) takes the torque off and faults
+/// the enabled drive, which leaves OP with the SM watchdog code. The next exchange
+/// reports it, and a reset brings the bus up, clears the drive fault and re-enables.
+#[test]
+fn a_silent_master_trips_the_drives_watchdog_and_a_reset_recovers() {
+    let e = Emulator::new(&ChainConfig::inertia_chain(2)).expect("chain");
+    let mut b = backend(&e, drive_file_with_watchdog(2, 1.27, 30));
+    b.on_configure().expect("configure");
+    b.read(0).expect("first read");
+    b.on_activate().expect("activate");
+    let mut tau = JointVector::zeros();
+    tau[0] = 10.0;
+    cycle(&mut b, &tau).expect("torque");
+    cycle(&mut b, &tau).expect("torque");
+    assert!(e.drive(0).expect("d0").torque_nm > 1.0, "torque applied");
+    // Well past 30 ms without a frame (the in-process link runs the watchdogs every 2 ms).
+    std::thread::sleep(Duration::from_millis(200));
+    for i in 0..2 {
+        let d = e.drive(i).expect("drive");
+        assert_eq!(
+            (d.al_state, d.al_error, d.al_status_code),
+            (4, true, 0x001B),
+            "drive {i} left OP on its watchdog"
+        );
+        assert!(d.state.is_fault(), "drive {i}: {:?}", d.state);
+        assert_eq!(d.error_code, 0x8130, "drive {i}");
+        assert_eq!(d.torque_nm, 0.0, "drive {i}: torque off");
+    }
+    let f = cycle(&mut b, &tau).expect_err("the drives left OP");
+    assert_eq!((f.joint, f.code), (Some(0), codes::left_op(0x001B)), "{f}");
+    b.on_error(&f);
+    b.on_reset().expect("reset: bus up, drive faults cleared");
+    b.on_activate().expect("enabled again");
+    cycle(&mut b, &JointVector::zeros()).expect("cycling again");
+    assert_eq!(e.drive(1).expect("d1").error_code, 0);
 }
 
 #[test]

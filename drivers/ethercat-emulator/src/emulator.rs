@@ -248,6 +248,18 @@ impl Emulator {
         self.lock().handle_frame(frame)
     }
 
+    /// Runs every SubDevice's process data watchdog on the wall clock (ESC 0x0400,
+    /// 0x0420, as the master armed it): a drive in OP whose outputs were not written for
+    /// longer than its watchdog time leaves OP (0x001B) and, if its power stage is on,
+    /// faults with [`crate::ERROR_COMMUNICATION`] (torque off). The transports call this
+    /// between frames, every few milliseconds, and every frame runs it first. Returns
+    /// the drives (bus positions) that expired now.
+    pub fn check_watchdogs(&self) -> Vec<usize> {
+        let mut c = self.lock();
+        let now = c.now_ns();
+        c.check_watchdogs(now)
+    }
+
     /// Injects a fault.
     pub fn inject(&self, fault: Fault) -> Result<(), NoSuchDrive> {
         let mut c = self.lock();
@@ -376,7 +388,25 @@ impl Chain {
         }
     }
 
+    fn check_watchdogs(&mut self, now: u64) -> Vec<usize> {
+        let mut expired = Vec::new();
+        for (i, s) in self.subs.iter_mut().enumerate() {
+            if s.check_watchdog(now) {
+                // The drive completes its fault reaction on its own (no exchange comes
+                // to step it): to Fault, torque off, the axis braked where it is.
+                let (q, qd) = (self.plant.position(i), self.plant.velocity(i));
+                s.drive.control(false, q, qd);
+                s.drive.sense(q, qd);
+                s.objects_to_inputs();
+                expired.push(i);
+            }
+        }
+        expired
+    }
+
     fn handle_frame(&mut self, frame: &[u8]) -> Option<Reply> {
+        let now = self.now_ns();
+        self.check_watchdogs(now);
         if frame.len() < 14 || u16::from_be_bytes([frame[12], frame[13]]) != ETHERCAT_ETHERTYPE {
             self.counters.ignored += 1;
             return None;
@@ -396,7 +426,6 @@ impl Chain {
             return None;
         }
         let mut out = frame.to_vec();
-        let now = self.now_ns();
         let mut exchange = false;
         for d in &datagrams {
             exchange |= self.datagram(&mut out, d, reached, now);
@@ -460,7 +489,7 @@ impl Chain {
                 cmd::LRD | cmd::LWR | cmd::LRW => {
                     let r = matches!(d.command, cmd::LRD | cmd::LRW);
                     let w = matches!(d.command, cmd::LWR | cmd::LRW);
-                    let add = s.logical(laddr, data, r, w);
+                    let add = s.logical(laddr, data, r, w, t);
                     logical |= add > 0;
                     add
                 }

@@ -52,6 +52,10 @@ const REG_DC_PORT_TIMES: u16 = 0x0900;
 const REG_DC_SYSTEM_TIME: u16 = 0x0910;
 const REG_DC_RECEIVE_TIME: u16 = 0x0918;
 const REG_DC_OFFSET: u16 = 0x0920;
+const REG_WATCHDOG_DIVIDER: u16 = 0x0400;
+const REG_WATCHDOG_PD: u16 = 0x0420;
+const REG_WATCHDOG_STATUS: u16 = 0x0440;
+const REG_WATCHDOG_COUNTER_PD: u16 = 0x0442;
 
 /// A SyncManager channel as configured in 0x0800 + 8n (ETG.1000.4 table 58).
 #[derive(Debug, Clone, Copy)]
@@ -89,6 +93,9 @@ pub(crate) struct SubDevice {
     pub drive: Drive,
     rx_layout: Vec<MappedObject>,
     tx_layout: Vec<MappedObject>,
+    /// When the outputs (SM2) were last written in OP, or OP was entered: the process
+    /// data watchdog's start (local clock, ns). `None` outside OP.
+    outputs_written_ns: Option<u64>,
 }
 
 fn overlaps(addr: u32, len: usize, reg: u16, reg_len: u32) -> bool {
@@ -106,6 +113,7 @@ impl SubDevice {
             drive,
             rx_layout: Vec::new(),
             tx_layout: Vec::new(),
+            outputs_written_ns: None,
         };
         // Type, revision, build; FMMUs, SMs, RAM size (KiB), ports 0 and 1 MII.
         s.mem[0x0000] = 0x11;
@@ -165,6 +173,9 @@ impl SubDevice {
 
     /// Sets AL status and status code.
     pub fn set_al(&mut self, state: u8, error: bool, code: u16) {
+        if state != al::OP {
+            self.outputs_written_ns = None;
+        }
         self.mem[REG_AL_STATUS as usize] = state | if error { 0x10 } else { 0 };
         self.put(REG_AL_STATUS_CODE, &code.to_le_bytes());
     }
@@ -394,7 +405,14 @@ impl SubDevice {
 
     /// A logical access (LRD/LWR/LRW) through the FMMUs; returns the working counter
     /// increment: +1 if inputs were read, +1 (LWR) or +2 (LRW) if outputs were written.
-    pub fn logical(&mut self, laddr: u32, data: &mut [u8], read: bool, write: bool) -> u16 {
+    pub fn logical(
+        &mut self,
+        laddr: u32,
+        data: &mut [u8],
+        read: bool,
+        write: bool,
+        now_ns: u64,
+    ) -> u16 {
         let (mut did_read, mut did_write) = (false, false);
         let end = laddr as u64 + data.len() as u64;
         for f in 0..8 {
@@ -424,6 +442,11 @@ impl SubDevice {
                 self.mem[p0..p0 + n].copy_from_slice(&data[d0..d0 + n]);
                 did_write = true;
             }
+        }
+        if did_write && self.al_state() == al::OP {
+            self.outputs_written_ns = Some(now_ns);
+            // Watchdog status (0x0440 bit 0): process data active, not expired.
+            self.mem[usize::from(REG_WATCHDOG_STATUS)] |= 0x01;
         }
         u16::from(did_read)
             + if did_write {
@@ -511,6 +534,40 @@ impl SubDevice {
         self.set_mailbox_full(1, true);
     }
 
+    /// The process data watchdog time (ns): ESC 0x0420 in units of
+    /// (0x0400 + 2) × 40 ns (ETG.1000.4 6.3); 0 = off.
+    pub fn watchdog_ns(&self) -> u64 {
+        let divider = u64::from(self.u16(REG_WATCHDOG_DIVIDER));
+        (divider + 2) * 40 * u64::from(self.u16(REG_WATCHDOG_PD))
+    }
+
+    /// The process data watchdog at `now_ns` (local clock): in OP, outputs not written
+    /// for longer than [`SubDevice::watchdog_ns`] expire it. The ESC clears 0x0440 bit 0
+    /// and counts in 0x0442; the drive application reacts as a drive's does: an enabled
+    /// power stage faults (`Drive::outputs_lost`, torque off at once) and the device
+    /// leaves OP for SAFE-OP with the error bit and 0x001B (sync manager watchdog).
+    /// Returns whether it expired now.
+    pub fn check_watchdog(&mut self, now_ns: u64) -> bool {
+        if self.al_state() != al::OP {
+            return false;
+        }
+        let wd = self.watchdog_ns();
+        let Some(since) = self.outputs_written_ns else {
+            // OP entered since the last check: the watchdog runs from here.
+            self.outputs_written_ns = Some(now_ns);
+            return false;
+        };
+        if wd == 0 || now_ns.saturating_sub(since) <= wd {
+            return false;
+        }
+        self.mem[usize::from(REG_WATCHDOG_STATUS)] &= !0x01;
+        let count = self.mem[usize::from(REG_WATCHDOG_COUNTER_PD)];
+        self.mem[usize::from(REG_WATCHDOG_COUNTER_PD)] = count.saturating_add(1);
+        self.drive.outputs_lost();
+        self.set_al(al::SAFE_OP, true, al_status_code::SM_WATCHDOG);
+        true
+    }
+
     /// Replaces the identity (SII words 0x0008-0x000B and object 0x1018).
     pub fn set_identity(&mut self, vendor_id: u32, product_code: u32) {
         sii::set_identity(&mut self.sii, vendor_id, product_code);
@@ -532,8 +589,64 @@ fn writable(r: usize) -> bool {
         0x0000..=0x000F => false,
         0x0110..=0x0111 => false,
         0x0130..=0x0135 => false,
+        0x0440..=0x0441 => false,
         0x0800..=0x087F => !matches!((r - 0x0800) % 8, 5 | 7),
         0x0900..=0x090F | 0x0918..=0x091F => false,
         _ => r < MEM_SIZE,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use microrobot_ethercat_cia402::cia402::DriveState;
+
+    fn enabled(s: &mut SubDevice) {
+        for cw in [0x0006u16, 0x0007, 0x000F] {
+            s.drive.od.set(0x6040, 0, &cw.to_le_bytes());
+            s.drive.control(true, 0.0, 0.0);
+        }
+        assert_eq!(s.drive.state(), DriveState::OperationEnabled);
+    }
+
+    #[test]
+    fn the_process_data_watchdog_expires_in_op_only_and_faults_an_enabled_drive() {
+        let mut s = SubDevice::new(&DriveConfig::seed_axis(0));
+        s.set_al(al::OP, false, 0);
+        assert!(
+            !s.check_watchdog(0) && !s.check_watchdog(10_000_000_000),
+            "off at 0"
+        );
+        // 100 µs units (divider 2498), 10 ms.
+        assert!(s.write(REG_WATCHDOG_DIVIDER, &2498u16.to_le_bytes(), 0));
+        assert!(s.write(REG_WATCHDOG_PD, &100u16.to_le_bytes(), 0));
+        assert_eq!(s.watchdog_ns(), 10_000_000);
+        enabled(&mut s);
+        s.set_al(al::SAFE_OP, false, 0);
+        s.set_al(al::OP, false, 0);
+        assert!(!s.check_watchdog(1_000_000), "runs from OP on");
+        assert!(!s.check_watchdog(11_000_000), "not longer than 10 ms yet");
+        assert!(s.check_watchdog(11_000_001));
+        assert_eq!(
+            (s.al_state(), s.al_error(), s.al_status_code()),
+            (al::SAFE_OP, true, al_status_code::SM_WATCHDOG)
+        );
+        assert_eq!(s.drive.state(), DriveState::FaultReactionActive);
+        assert_eq!(s.drive.od.u16(0x603F, 0), crate::drive::ERROR_COMMUNICATION);
+        assert_eq!(s.drive.torque_nm(), 0.0);
+        assert_eq!(s.mem[usize::from(REG_WATCHDOG_STATUS)] & 1, 0, "expired");
+        assert_eq!(s.mem[usize::from(REG_WATCHDOG_COUNTER_PD)], 1);
+        assert!(!s.check_watchdog(50_000_000), "once: no longer in OP");
+
+        // A drive whose power stage is off only leaves OP.
+        let mut s = SubDevice::new(&DriveConfig::seed_axis(1));
+        assert!(s.write(REG_WATCHDOG_DIVIDER, &2498u16.to_le_bytes(), 0));
+        assert!(s.write(REG_WATCHDOG_PD, &100u16.to_le_bytes(), 0));
+        s.set_al(al::OP, false, 0);
+        assert!(!s.check_watchdog(0));
+        assert!(s.check_watchdog(20_000_000));
+        assert_eq!(s.al_state(), al::SAFE_OP);
+        assert_eq!(s.drive.state(), DriveState::SwitchOnDisabled);
+        assert_eq!(s.drive.od.u16(0x603F, 0), 0);
     }
 }

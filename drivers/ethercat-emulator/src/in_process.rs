@@ -65,6 +65,7 @@ impl InProcessLink {
                             _ => {}
                         }
                     }
+                    emulator.check_watchdogs();
                     for frame in late.due() {
                         // A frame the MainDevice no longer waits for is refused:
                         // exactly what a late frame on the wire meets.

@@ -11,7 +11,11 @@ use crate::emulator::{Emulator, LateFrames};
 /// The driver's AF_PACKET socket: one implementation for both ends of the veth pair.
 pub use microrobot_ethercat_cia402::raw_socket::RawSocket;
 
-/// Answers frames on `socket` until `stop` is set (checked every 50 ms). The socket's
+/// How often the drives' process data watchdogs run while no frame arrives.
+const WATCHDOG_POLL: Duration = Duration::from_millis(2);
+
+/// Answers frames on `socket` until `stop` is set (checked every 2 ms, when the drives'
+/// process data watchdogs run too). The socket's
 /// own outgoing frames (its replies) are skipped by [`RawSocket::recv`]; malformed
 /// frames are dropped and counted in [`Emulator::counters`]. Frames are answered
 /// whatever their source MAC, as a first SubDevice does (a master using its NIC's
@@ -23,7 +27,8 @@ pub fn serve(emulator: &Emulator, socket: &RawSocket, stop: &AtomicBool) -> io::
         for frame in late.due() {
             socket.send(&frame)?;
         }
-        let wait = late.wait(Duration::from_millis(50));
+        emulator.check_watchdogs();
+        let wait = late.wait(WATCHDOG_POLL);
         let Some(n) = socket.recv(&mut buf, wait)? else {
             continue;
         };

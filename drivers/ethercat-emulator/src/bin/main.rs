@@ -96,14 +96,15 @@ fn control_loop(emulator: &Emulator) {
             for i in 0..emulator.len() {
                 if let Some(d) = emulator.drive(i) {
                     println!(
-                        "drive {i}: {} statusword 0x{:04X} error 0x{:04X} al 0x{:02X}{} code 0x{:04X} q {:.6} rad",
+                        "drive {i}: {} statusword 0x{:04X} error 0x{:04X} al 0x{:02X}{} code 0x{:04X} q {:.6} rad torque {:.3} N·m",
                         d.state,
                         d.statusword,
                         d.error_code,
                         d.al_state,
                         if d.al_error { "+err" } else { "" },
                         d.al_status_code,
-                        d.position_rad
+                        d.position_rad,
+                        d.torque_nm
                     );
                 }
             }
