@@ -40,7 +40,18 @@ pub fn run(robot_path: &Path, method: Method) -> anyhow::Result<()> {
         .map_err(with_code(exit_code::BAD_CONFIG))?;
     let stdin = std::io::stdin();
     let stdout = std::io::stdout();
-    process(&robot, method, stdin.lock(), stdout.lock())
+    process(&robot, method, stdin.lock(), stdout.lock()).map_err(exit_code_of_refused)
+}
+
+/// Tags an error that is (or is caused by) [`RefusedLines`] with `JOB_FAILED`, the exit
+/// code of an `eval` command that answered some lines with an error; any other error
+/// passes unchanged.
+pub fn exit_code_of_refused(e: anyhow::Error) -> anyhow::Error {
+    if e.chain().any(|c| c.is::<RefusedLines>()) {
+        with_code(exit_code::JOB_FAILED)(e)
+    } else {
+        e
+    }
 }
 
 /// Processes every line of `input`, writing one output line each to `output`.

@@ -1,13 +1,12 @@
 //! The `microrobot` CLI's subcommands, as a library so system tests and tools share them.
 
+pub use microrobot_command_line::{config_path, duration, exit};
+
 pub mod check;
-pub mod config_path;
 pub mod driver_check;
 pub mod driver_info;
-pub mod duration;
 pub mod eval_model;
 pub mod eval_trajectory;
-pub mod exit;
 pub mod inspect;
 pub mod probe_chain;
 pub mod recording;

@@ -8,6 +8,7 @@
 use std::ffi::OsString;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::LazyLock;
 
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, recover, replay};
@@ -16,10 +17,19 @@ use microrobot_cli::{
     soak, study, teleop_report, teleop_source, top,
 };
 
+/// `--version`: the package version and the build id.
+static VERSION: LazyLock<String> = LazyLock::new(|| {
+    format!(
+        "{} (build {})",
+        env!("CARGO_PKG_VERSION"),
+        microrobot_build_id::BUILD_ID
+    )
+});
+
 #[derive(Parser)]
 #[command(
     name = "microrobot",
-    version = concat!(env!("CARGO_PKG_VERSION"), " (build ", env!("MICROROBOT_BUILD_ID"), ")"),
+    version = VERSION.as_str(),
     about = "Real-time motion stack for a 6-DOF surgical arm"
 )]
 struct Cli {
@@ -192,7 +202,9 @@ fn main() -> ExitCode {
         Command::Replay(args) => replay::main(args),
         Command::Recover(args) => recover::main(args),
         Command::Eval(EvalCommand::Model { robot, method }) => eval_model::run(&robot, method),
-        Command::Eval(EvalCommand::Trajectory) => eval_trajectory::run(),
+        Command::Eval(EvalCommand::Trajectory) => {
+            eval_trajectory::run().map_err(eval_model::exit_code_of_refused)
+        }
         Command::Robot(cmd) => robot_cmd::main(cmd),
         Command::Completions { shell } => {
             let mut cmd = <Cli as clap::CommandFactory>::command();

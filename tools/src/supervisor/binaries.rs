@@ -3,10 +3,10 @@
 //! and the live view (`microrobot-view`, a package of its own): beside the `microrobot`
 //! executable, and only if they come from the same build.
 //!
-//! Every binary of the `microrobot` package (and `microrobot-view`, built from its
-//! library) embeds the build id that `tools/build.rs`
-//! computes from the sources (`microrobot-<role> --build-id` prints it). A service binary
-//! that is missing, or whose id is not this CLI's, is a binary of another build: when this
+//! Every binary of the `microrobot` package (and `microrobot-view`) embeds the build id
+//! that the package `microrobot-build-id` (`tools/build-id`) computes from the sources
+//! (`microrobot-<role> --build-id` prints it). A service binary that is missing, or
+//! whose id is not this CLI's, is a binary of another build: when this
 //! process runs under `cargo run` (Cargo's environment for this package is set), Cargo is
 //! asked to build them in the same profile and target directory, since `cargo run
 //! --bin microrobot` builds only the CLI; otherwise it is an error that names the binary
@@ -20,7 +20,7 @@ use anyhow::Context as _;
 use microrobot_messages::ServiceRole;
 
 /// This build's id (see the module doc).
-pub const BUILD_ID: &str = env!("MICROROBOT_BUILD_ID");
+pub const BUILD_ID: &str = microrobot_build_id::BUILD_ID;
 
 /// The roles that run as service binaries, in start order.
 const ROLES: [ServiceRole; 3] = [

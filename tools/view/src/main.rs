@@ -219,14 +219,14 @@ fn serve(args: Args) -> Result<()> {
 fn main() -> ExitCode {
     let args = Args::parse();
     if args.build_id {
-        println!("{}", microrobot_cli::supervisor::binaries::BUILD_ID);
+        println!("{}", microrobot_build_id::BUILD_ID);
         return ExitCode::SUCCESS;
     }
     match serve(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::from(microrobot_cli::exit::code_of(&e))
+            ExitCode::from(microrobot_command_line::exit::code_of(&e))
         }
     }
 }

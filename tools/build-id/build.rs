@@ -1,10 +1,10 @@
-//! Sets `MICROROBOT_BUILD_ID`: a hash of every source the binaries of this package are
-//! built from (the workspace manifest and lock file; the manifest and `src/` of
-//! `messages` and of each crate in `services/`; `services/bin/`; `tools/src/`; the live
-//! view's package `tools/view/`). The CLI, the three service binaries and
-//! `microrobot-view` (through this package's library) embed it, and the CLI refuses to
-//! start one whose id differs from its own: one left over from an older build (e.g.
-//! after `cargo build --bin microrobot` alone) never runs.
+//! Sets `MICROROBOT_BUILD_ID`: a hash of every source the workspace's binaries are built
+//! from (the workspace manifest and lock file; the manifest and `src/` of `messages`, of
+//! each crate in `services/` and of each crate in `tools/`; `services/bin/`;
+//! `tools/src/`). The CLI, the three service binaries and `microrobot-view` embed it
+//! (through this package's `BUILD_ID`), and the CLI refuses to start one whose id
+//! differs from its own: one left over from an older build (e.g. after `cargo build
+//! --bin microrobot` alone) never runs.
 //!
 //! The hash is FNV-1a over each file's path and bytes in a sorted walk; it only has to
 //! tell builds apart, not resist an adversary.
@@ -12,7 +12,13 @@
 use std::path::{Path, PathBuf};
 
 fn main() {
-    let root = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
+    // This package is `tools/build-id` of the workspace.
+    let manifest_dir = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
+    let root = manifest_dir
+        .ancestors()
+        .nth(2)
+        .unwrap_or(&manifest_dir)
+        .to_path_buf();
     let mut inputs: Vec<String> = [
         "Cargo.toml",
         "Cargo.lock",
@@ -20,23 +26,24 @@ fn main() {
         "messages/src",
         "services/bin",
         "tools/src",
-        "tools/view/Cargo.toml",
-        "tools/view/src",
     ]
     .map(String::from)
     .to_vec();
-    if let Ok(crates) = std::fs::read_dir(root.join("services")) {
+    for dir in ["services", "tools"] {
+        let Ok(crates) = std::fs::read_dir(root.join(dir)) else {
+            continue;
+        };
         for entry in crates.flatten() {
             let name = entry.file_name().to_string_lossy().into_owned();
             if entry.path().join("Cargo.toml").is_file() {
-                inputs.push(format!("services/{name}/Cargo.toml"));
-                inputs.push(format!("services/{name}/src"));
+                inputs.push(format!("{dir}/{name}/Cargo.toml"));
+                inputs.push(format!("{dir}/{name}/src"));
             }
         }
     }
     let mut files = Vec::new();
     for input in &inputs {
-        println!("cargo::rerun-if-changed={input}");
+        println!("cargo::rerun-if-changed={}", root.join(input).display());
         collect(&root.join(input), &mut files);
     }
     files.sort();

@@ -27,11 +27,6 @@ pub fn with_code(code: u8) -> impl FnOnce(anyhow::Error) -> anyhow::Error {
 
 /// The exit code of a command's error: its tag, else `FAILURE`.
 pub fn code_of(e: &anyhow::Error) -> u8 {
-    if e.chain()
-        .any(|c| c.is::<crate::eval_trajectory::RefusedLines>())
-    {
-        return exit_code::JOB_FAILED;
-    }
     e.chain()
         .find_map(|c| c.downcast_ref::<Coded>())
         .map_or(exit_code::FAILURE, |c| c.code)

@@ -15,8 +15,11 @@ pub fn default_config() -> PathBuf {
     if local.exists() {
         return local;
     }
-    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join(RELATIVE);
-    if shipped.exists() {
+    // This package is `tools/command-line` of the source tree.
+    let source_tree = Path::new(env!("CARGO_MANIFEST_DIR")).ancestors().nth(2);
+    if let Some(shipped) = source_tree.map(|dir| dir.join(RELATIVE))
+        && shipped.exists()
+    {
         return shipped;
     }
     local
