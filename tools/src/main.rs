@@ -13,9 +13,9 @@ use std::sync::LazyLock;
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, recover, replay};
 use microrobot_cli::{
-    check, driver_check, eval_model, eval_trajectory, inspect, probe_chain, robot_cmd, run, send,
-    soak, study, teleop_report, teleop_source, top,
+    check, driver_check, inspect, probe_chain, run, send, soak, teleop_report, teleop_source, top,
 };
+use microrobot_study::{self as study, eval_model, eval_trajectory, robot_cmd};
 
 /// `--version`: the package version and the build id.
 static VERSION: LazyLock<String> = LazyLock::new(|| {

@@ -11,7 +11,7 @@ use anyhow::{Context as _, Result, bail};
 
 use super::{Recording, setpoint_from, state_from, torque_from};
 
-use crate::study::plot::{Panel, Series, draw, thin};
+use microrobot_study::plot::{Panel, Series, draw, thin};
 
 /// Options of `microrobot plot`.
 #[derive(Debug, Clone, clap::Args)]

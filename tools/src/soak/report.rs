@@ -606,7 +606,7 @@ impl Report {
     /// A LinuxCNC-style latency histogram per hop: latency in 1 µs bins against
     /// log10(1 + messages in the bin), so the rare tail shows beside the mode.
     fn draw_histogram(&self, path: &Path) -> anyhow::Result<()> {
-        use crate::study::plot::{Panel, Series, draw};
+        use microrobot_study::plot::{Panel, Series, draw};
         let panels: Vec<Panel> = self
             .hop_histograms
             .iter()

@@ -1,3 +1,7 @@
+//! The offline commands of `microrobot`, which read a robot file and run no pipeline:
+//! `microrobot study` (below), `eval model` ([`eval_model`]), `eval trajectory`
+//! ([`eval_trajectory`]) and `robot urdf` ([`robot_cmd`]).
+//!
 //! `microrobot study`: the seed chapter's study regenerated from a robot file and a
 //! motion program — Tables 2–5 as read, the workspace, the Jacobian and tool paths,
 //! the four trajectory methods at several final times with their torque histories
@@ -8,12 +12,15 @@
 //! CSV data under `data/`, and `summary.json` (the tables' numbers and verdicts, SI).
 
 mod cases;
+pub mod eval_model;
+pub mod eval_trajectory;
 mod figures;
 mod kinematics;
 mod mintime;
 mod motion;
 pub mod plot;
 mod report;
+pub mod robot_cmd;
 pub mod units;
 mod verdicts;
 

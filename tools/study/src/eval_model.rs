@@ -15,7 +15,7 @@ use anyhow::Context;
 use microrobot_runtime::exit_code;
 
 use crate::eval_trajectory::RefusedLines;
-use crate::exit::with_code;
+use microrobot_command_line::exit::with_code;
 use microrobot_model::{
     JointVector, MAX_JOINTS, ModelData, Robot, coriolis_torque, gravity_torque, jacobian,
     lagrange_euler, mass_matrix, rnea,
@@ -202,7 +202,7 @@ mod tests {
     use super::*;
 
     fn seed_arm() -> Robot {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/robots/seed-arm.toml");
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml");
         Robot::from_file(&path).unwrap_or_else(|e| panic!("{e}"))
     }
 

@@ -9,7 +9,7 @@ use anyhow::{Context as _, Result};
 use microrobot_model::Robot;
 use microrobot_runtime::exit_code;
 
-use crate::exit::with_code;
+use microrobot_command_line::exit::with_code;
 
 /// `microrobot robot ...`.
 #[derive(Debug, clap::Subcommand)]

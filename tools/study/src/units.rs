@@ -200,7 +200,7 @@ mod tests {
     use super::*;
 
     fn robot(file: &str) -> Robot {
-        let path = format!("{}/config/robots/{file}", env!("CARGO_MANIFEST_DIR"));
+        let path = format!("{}/../../config/robots/{file}", env!("CARGO_MANIFEST_DIR"));
         Robot::from_file(std::path::Path::new(&path)).expect("robot loads")
     }
 
