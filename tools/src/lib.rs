@@ -1,17 +1,13 @@
 //! The `microrobot` CLI's subcommands, as a library so system tests and tools share them.
 
 pub use microrobot_command_line::{config_path, duration, exit};
+pub use microrobot_supervisor::{self as supervisor, check, run};
 
-pub mod check;
-pub mod driver_check;
-pub mod driver_info;
 pub mod inspect;
 pub mod probe_chain;
 pub mod recording;
-pub mod run;
 pub mod send;
 pub mod soak;
-pub mod supervisor;
 pub mod teleop_report;
 pub mod teleop_source;
 pub mod top;

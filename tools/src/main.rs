@@ -12,10 +12,9 @@ use std::sync::LazyLock;
 
 use clap::{Parser, Subcommand};
 use microrobot_cli::recording::{export, plot, record, recover, replay};
-use microrobot_cli::{
-    check, driver_check, inspect, probe_chain, run, send, soak, teleop_report, teleop_source, top,
-};
+use microrobot_cli::{inspect, probe_chain, send, soak, teleop_report, teleop_source, top};
 use microrobot_study::{self as study, eval_model, eval_trajectory, robot_cmd};
+use microrobot_supervisor::{binaries, check, driver_check, run};
 
 /// `--version`: the package version and the build id.
 static VERSION: LazyLock<String> = LazyLock::new(|| {
@@ -158,10 +157,10 @@ enum EvalCommand {
 }
 
 /// Replaces this process with `microrobot-view ARGS` of this build (see
-/// `supervisor::binaries`); returns only on failure.
+/// `microrobot_supervisor::binaries`); returns only on failure.
 fn view(args: Vec<OsString>) -> anyhow::Result<()> {
     use std::os::unix::process::CommandExt as _;
-    let path = microrobot_cli::supervisor::binaries::locate_view()?;
+    let path = binaries::locate_view()?;
     let err = std::process::Command::new(&path).args(args).exec();
     Err(anyhow::anyhow!("cannot run {}: {err}", path.display()))
 }
@@ -216,7 +215,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::from(microrobot_cli::exit::code_of(&e))
+            ExitCode::from(microrobot_command_line::exit::code_of(&e))
         }
     }
 }

@@ -24,22 +24,22 @@ use microrobot_model::Robot;
 use microrobot_runtime::config::FailurePolicy;
 use microrobot_runtime::{PipelineConfig, exit_code};
 
-use crate::supervisor::binaries::ServiceBinaries;
-use crate::supervisor::instance::{self, InstanceInUse};
-use crate::supervisor::monitor::{ROLES, StatusMonitor, slot};
-use crate::supervisor::process::{Launch, Service, describe, log_tail};
-use crate::supervisor::state_tap::StateTap;
-use crate::supervisor::summary::{ProgramSummary, RunFacts, Summary, fold, lifecycle_name};
+use crate::binaries::ServiceBinaries;
+use crate::instance::{self, InstanceInUse};
+use crate::monitor::{ROLES, StatusMonitor, slot};
+use crate::process::{Launch, Service, describe, log_tail};
+use crate::state_tap::StateTap;
+use crate::summary::{ProgramSummary, RunFacts, Summary, fold, lifecycle_name};
 
 /// Options of `microrobot run`; each override replaces the config file's key.
 #[derive(Debug, Clone, clap::Args)]
 pub struct RunArgs {
     /// Pipeline config, every key documented in config/pipeline.README.md (default:
     /// ./config/pipeline.toml, else the config shipped with the sources).
-    #[arg(long, default_value_os_t = crate::config_path::default_config())]
+    #[arg(long, default_value_os_t = microrobot_command_line::config_path::default_config())]
     pub config: PathBuf,
     /// Stop after this many seconds (overrides `duration_s`).
-    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub duration: Option<f64>,
     /// Control rate in Hz (overrides `rate_hz`).
     #[arg(long, value_name = "HZ")]
@@ -189,12 +189,12 @@ pub struct FloorProbe {
 
 impl FloorProbe {
     /// Stops the loop and returns its figures (None if it never ran or failed).
-    pub fn finish(&mut self) -> Option<crate::supervisor::summary::Floor> {
+    pub fn finish(&mut self) -> Option<crate::summary::Floor> {
         self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
         match self.thread.take()?.join() {
-            Ok(Ok(f)) => Some(crate::supervisor::summary::Floor {
+            Ok(Ok(f)) => Some(crate::summary::Floor {
                 ticks: f.ticks,
-                lateness_us: crate::supervisor::summary::Percentiles::from(&f.lateness),
+                lateness_us: crate::summary::Percentiles::from(&f.lateness),
                 deadline_misses: f.deadline_misses,
                 window_p99_us: Vec::new(),
             }),

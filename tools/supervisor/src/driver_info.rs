@@ -92,7 +92,7 @@ pub fn render(cfg: &PipelineConfig, robot: &Robot, resolved: &Path) -> String {
 /// Writes [`render`] beside the resolved config (owner-only, never through a symlink):
 /// what `run` and `driver-check` hand a driver.
 pub fn write(cfg: &PipelineConfig, robot: &Robot, resolved: &Path) -> anyhow::Result<()> {
-    crate::supervisor::instance::write_private(
+    crate::instance::write_private(
         &path_beside(resolved),
         render(cfg, robot, resolved).as_bytes(),
     )
@@ -105,7 +105,7 @@ mod tests {
 
     fn robot(file: &str) -> Robot {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("config/robots")
+            .join("../../config/robots")
             .join(file);
         Robot::from_file(&path).expect("robot file")
     }

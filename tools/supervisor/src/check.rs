@@ -25,7 +25,7 @@ use crate::run::{RunArgs, resolve_config};
 #[derive(Debug, Clone, clap::Args)]
 pub struct CheckArgs {
     /// Pipeline config (default: ./config/pipeline.toml, else the shipped one).
-    #[arg(long, default_value_os_t = crate::config_path::default_config())]
+    #[arg(long, default_value_os_t = microrobot_command_line::config_path::default_config())]
     pub config: PathBuf,
     /// Robot file (overrides `robot`).
     #[arg(long, value_name = "FILE")]

@@ -33,15 +33,15 @@ use microrobot_runtime::exit_code;
 use microrobot_runtime::{Outbox, PipelineConfig};
 use serde::Serialize;
 
-use crate::supervisor::instance;
-use crate::supervisor::monitor::StatusMonitor;
-use crate::supervisor::process::{Launch, Service, describe};
+use crate::instance;
+use crate::monitor::StatusMonitor;
+use crate::process::{Launch, Service, describe};
 
 /// Arguments of `microrobot driver-check`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct DriverCheckArgs {
     /// Pipeline config: the robot, rate, watchdog and timeouts the driver is held to.
-    #[arg(long, default_value_os_t = crate::config_path::default_config())]
+    #[arg(long, default_value_os_t = microrobot_command_line::config_path::default_config())]
     pub config: PathBuf,
     /// Check the lockstep contract (one state per torque) instead of free-running.
     #[arg(long)]
