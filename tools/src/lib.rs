@@ -3,11 +3,5 @@
 pub use microrobot_command_line::{config_path, duration, exit};
 pub use microrobot_supervisor::{self as supervisor, check, run};
 
-pub mod inspect;
 pub mod probe_chain;
-pub mod recording;
-pub mod send;
 pub mod soak;
-pub mod teleop_report;
-pub mod teleop_source;
-pub mod top;

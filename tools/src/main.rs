@@ -11,8 +11,9 @@ use std::process::ExitCode;
 use std::sync::LazyLock;
 
 use clap::{Parser, Subcommand};
-use microrobot_cli::recording::{export, plot, record, recover, replay};
-use microrobot_cli::{inspect, probe_chain, send, soak, teleop_report, teleop_source, top};
+use microrobot_bus_tools::recording::{export, plot, record, recover, replay};
+use microrobot_bus_tools::{inspect, send, teleop_report, teleop_source, top};
+use microrobot_cli::{probe_chain, soak};
 use microrobot_study::{self as study, eval_model, eval_trajectory, robot_cmd};
 use microrobot_supervisor::{binaries, check, driver_check, run};
 

@@ -6,7 +6,6 @@
 //! verdict fails: an unrecovered fault, a jump, lost messages outside the kill windows,
 //! a safe-state latch without an injected fault, or a pipeline that did not end cleanly.
 
-pub mod continuity;
 pub mod inject;
 pub mod observer;
 pub mod report;
@@ -26,8 +25,8 @@ use microrobot_runtime::timer::{FloorReport, floor_probe_windows};
 
 use crate::run::{self, Control, Hooks, RunArgs};
 use crate::supervisor::summary::Percentiles;
-use continuity::Bounds;
 use inject::{CommandPort, CpuLoad, Rng, Targets};
+use microrobot_bus_tools::invariants::{self, Bounds};
 use observer::Observer;
 use report::{Facts, Floor, Kill, Report};
 
@@ -70,7 +69,7 @@ pub struct SoakArgs {
     /// Seed of the random commands.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Relative tolerance of the jump thresholds (see `soak::continuity`).
+    /// Relative tolerance of the jump thresholds (see `microrobot_bus_tools::invariants`).
     #[arg(long, default_value_t = 0.5, value_name = "TOL")]
     pub jump_tolerance: f64,
     /// No progress output.
@@ -306,24 +305,24 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
             "|Δq| ≤ vmax·dt·(1+{tol}) + {:e}, |Δq̇| ≤ amax·dt·(1+{tol}) + {:e}, dt = ticks × period; \
              a restarted planner's first setpoint against the measured state likewise with dt = its age + one period; \
              setpoints mirroring the held arm (HOLD_FOR_SAFE_STATE) are not judged",
-            continuity::EPS_Q,
-            continuity::EPS_QD
+            invariants::EPS_Q,
+            invariants::EPS_QD
         ),
     );
     thresholds.insert(
         "torque".into(),
         format!(
             "commanded and applied: |Δτ| ≤ τmax·dt/{:.0} ms·(1+{tol}) (a full-scale change in no less than {:.0} ms; the actuator blends every switch over ramp_ms)",
-            continuity::T_SLEW_S * 1e3,
-            continuity::T_SLEW_S * 1e3
+            invariants::T_SLEW_S * 1e3,
+            invariants::T_SLEW_S * 1e3
         ),
     );
     thresholds.insert(
         "state".into(),
         format!(
             "within one actuator process |Δq − (q̇₀+q̇₁)/2·dt| ≤ {:e}; a restarted actuator resumes its predecessor's last q and q̇ within {:e}",
-            continuity::EPS_STATE,
-            continuity::EPS_RESUME
+            invariants::EPS_STATE,
+            invariants::EPS_RESUME
         ),
     );
     let report = Report::build(

@@ -1,10 +1,11 @@
 //! The soak's online observer: a thread that drains the setpoint, torque, state and
 //! status streams of the instance (every [`POLL_MS`] ms; each subscriber queues 64
-//! messages, 64 ms at 1 kHz), checks every consecutive pair for continuity
-//! ([`super::continuity`]), and keeps only what the report needs: health edges (for the
-//! time to detect and recover each fault), safe-state latches, lost-message increments
-//! of the services, resource samples, its own receive gaps, and the per-hop latency
-//! budget measured from the messages' own stamps ([`Hops`]).
+//! messages, 64 ms at 1 kHz), checks every consecutive pair against the stream
+//! invariants ([`microrobot_bus_tools::invariants`]), and keeps only what the report
+//! needs: health edges (for the time to detect and recover each fault), safe-state
+//! latches, lost-message increments of the services, resource samples, its own receive
+//! gaps, and the per-hop latency budget measured from the messages' own stamps
+//! ([`Hops`]).
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -22,7 +23,7 @@ use serde::{Deserialize, Serialize};
 
 use microrobot_runtime::stats::LatencyHistogram;
 
-use super::continuity::{self, Bounds, Jump};
+use microrobot_bus_tools::invariants::{self, Bounds, Jump};
 
 /// Drain period of the observer thread.
 pub const POLL_MS: u64 = 2;
@@ -426,7 +427,7 @@ impl Checker {
                 if self.planner_started && !hold {
                     self.planner_start_check(m, &mut found);
                 } else {
-                    continuity::setpoint_pair(&self.bounds, &last.msg, m, &mut found);
+                    invariants::setpoint_pair(&self.bounds, &last.msg, m, &mut found);
                 }
             }
             prev => {
@@ -458,7 +459,7 @@ impl Checker {
         self.planner_started = false;
         if let Some(s) = &self.state {
             let age = m.header.stamp_ns.saturating_sub(s.msg.header.stamp_ns) as f64 * 1e-9;
-            continuity::setpoint_start(&self.bounds, &s.msg, &self.state_acc, age, m, found);
+            invariants::setpoint_start(&self.bounds, &s.msg, &self.state_acc, age, m, found);
         }
     }
 
@@ -483,7 +484,7 @@ impl Checker {
                 let switch = (last.msg.flags ^ m.flags) & torque_flags::STATE_STALE != 0;
                 let followed = self.state_healthy != Some(false);
                 if followed && !switch {
-                    continuity::torque_pair(&self.bounds, &last.msg, m, &mut found);
+                    invariants::torque_pair(&self.bounds, &last.msg, m, &mut found);
                 }
             }
             Some(_) => self.edge(m.header.stamp_ns, EdgeKind::NewTorquePublisher),
@@ -525,10 +526,10 @@ impl Checker {
                     // against its predecessor's last one.
                     Some(prev) if steps == 1 => {
                         self.resumed_from = None;
-                        continuity::applied_torque_resume(&self.bounds, &prev, m, &mut found);
+                        invariants::applied_torque_resume(&self.bounds, &prev, m, &mut found);
                         let mut from = last.msg;
                         from.tau_applied = m.tau_applied;
-                        continuity::state_pair(&self.bounds, &from, m, 1, &mut found);
+                        invariants::state_pair(&self.bounds, &from, m, 1, &mut found);
                     }
                     Some(_) => self.resumed_from = None,
                     // The shutdown state of a clean stop: the backend went inactive
@@ -536,9 +537,9 @@ impl Checker {
                     None if m.lifecycle == LifecycleState::Inactive as u32
                         && last.msg.lifecycle != LifecycleState::Inactive as u32 =>
                     {
-                        continuity::state_shutdown(&self.bounds, &last.msg, m, &mut found)
+                        invariants::state_shutdown(&self.bounds, &last.msg, m, &mut found)
                     }
-                    None => continuity::state_pair(&self.bounds, &last.msg, m, steps, &mut found),
+                    None => invariants::state_pair(&self.bounds, &last.msg, m, steps, &mut found),
                 }
             }
             Some(last) => {
@@ -547,7 +548,7 @@ impl Checker {
                 let handed = self.handover.lock().ok().and_then(|mut h| h.take());
                 let prev = handed.unwrap_or(last.msg);
                 self.edge(m.header.stamp_ns, EdgeKind::NewStatePublisher);
-                continuity::state_resume(&self.bounds, &prev, m, &mut found);
+                invariants::state_resume(&self.bounds, &prev, m, &mut found);
                 self.resumed_from = Some(prev);
             }
             None => {}

@@ -10,9 +10,9 @@ use std::path::Path;
 use anyhow::Context as _;
 use serde::{Deserialize, Serialize};
 
-use super::continuity::Jump;
 use super::observer::{Edge, EdgeKind, Loss, Observed, ResourceSample};
 use crate::supervisor::summary::{Percentiles, Summary};
+use microrobot_bus_tools::invariants::Jump;
 
 /// After a fault has recovered, lost messages are still attributed to it for this long
 /// (statuses arrive at ~10 Hz and count a gap when the next message comes).
@@ -141,7 +141,7 @@ pub struct Report {
     pub seed: u64,
     pub load_average_start: String,
     pub load_average_end: String,
-    /// How the continuity thresholds are derived (see `soak::continuity`).
+    /// How the continuity thresholds are derived (see `microrobot_bus_tools::invariants`).
     pub thresholds: BTreeMap<String, String>,
     pub verdict: Verdict,
     pub e2e_latency_us: Percentiles,

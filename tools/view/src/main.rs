@@ -19,9 +19,9 @@ use std::sync::Arc;
 use anyhow::{Context as _, Result, anyhow};
 use clap::Parser;
 use foxglove::{ChannelBuilder, PartialMetadata, RawChannel, Schema, WebSocketServer};
-use microrobot_cli::recording::tap::{self, BusTap, Payload, Received, Wake};
-use microrobot_cli::recording::viewer::{self, Feed, Periods};
-use microrobot_cli::recording::{self as recording, logs};
+use microrobot_bus_tools::recording::tap::{self, BusTap, Payload, Received, Wake};
+use microrobot_bus_tools::recording::viewer::{self, Feed, Periods};
+use microrobot_bus_tools::recording::{self as recording, logs};
 use microrobot_runtime::Shutdown;
 
 /// Options of `microrobot view`.
@@ -128,7 +128,7 @@ fn serve(args: Args) -> Result<()> {
     // iceoryx2's own notices (e.g. "no config file was loaded") only on request.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     tap::check_instance(&args.instance)?;
-    microrobot_cli::inspect::require_running(&args.instance)?;
+    microrobot_bus_tools::inspect::require_running(&args.instance)?;
     nice_process(10);
     let shutdown = Shutdown::new().context("cannot create the shutdown eventfd")?;
     shutdown

@@ -373,8 +373,8 @@ mod tests {
     use super::*;
 
     fn viewer() -> Viewer {
-        let robot =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/robots/seed-arm.toml");
+        let robot = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../config/robots/seed-arm.toml");
         let text = format!("robot = \"{}\"\n", robot.display());
         Viewer::from_config_text(&text, "test").expect("viewer")
     }

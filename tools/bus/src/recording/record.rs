@@ -43,7 +43,7 @@ pub struct RecordArgs {
     #[arg(long, value_name = "FILE.mcap")]
     pub out: PathBuf,
     /// Stop after this many seconds.
-    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub duration: Option<f64>,
     /// Create this file once every subscriber is open (the ready signal for a supervisor).
     #[arg(long, value_name = "FILE")]
@@ -478,7 +478,7 @@ pub fn main(args: RecordArgs) -> Result<()> {
     if let Some(path) = &args.ready_file {
         // A new file (a stale one removed first), owner-only, never through a symlink.
         let _ = std::fs::remove_file(path);
-        crate::supervisor::instance::create_private_new(path)
+        microrobot_supervisor::instance::create_private_new(path)
             .with_context(|| format!("cannot create {}", path.display()))?;
     }
     println!("recording {}", args.out.display());

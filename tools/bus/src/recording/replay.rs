@@ -368,7 +368,7 @@ pub fn main(args: ReplayArgs) -> Result<()> {
         );
     }
     if let Some(d) = &report.first_difference {
-        return Err(crate::exit::with_code(
+        return Err(microrobot_command_line::exit::with_code(
             microrobot_runtime::exit_code::JOB_FAILED,
         )(anyhow::anyhow!(
             "replay differs from the recording in {} of {} torques; first: {d}",

@@ -266,7 +266,7 @@ pub fn clock_offset_ns() -> i64 {
 /// The resolved config of `instance`'s run, from this user's private run directory,
 /// never through a symlink; `None` when there is none (yet).
 pub fn run_config(instance: &str) -> Option<Vec<u8>> {
-    let p = crate::supervisor::instance::run_file(instance, CONFIG_ATTACHMENT).ok()?;
+    let p = microrobot_supervisor::instance::run_file(instance, CONFIG_ATTACHMENT).ok()?;
     let mut f = std::fs::OpenOptions::new()
         .read(true)
         .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC)

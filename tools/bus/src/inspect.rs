@@ -15,9 +15,9 @@ use microrobot_messages::{
 };
 use serde_json::{Value, json};
 
-use crate::exit::with_code;
 use crate::recording;
-use crate::supervisor::instance;
+use microrobot_command_line::exit::with_code;
+use microrobot_supervisor::instance;
 
 /// The streams `echo` and `hz` take, by their bus names.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -59,7 +59,7 @@ pub struct EchoArgs {
     #[arg(long, default_value_t = 1, value_name = "N")]
     pub every: u64,
     /// Exit after this long (default: until Ctrl-C or the pipeline ends).
-    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub duration: Option<f64>,
 }
 
@@ -73,10 +73,10 @@ pub struct HzArgs {
     #[arg(long, default_value = "default", value_name = "NAME")]
     pub instance: String,
     /// Length of each measuring window; one line per window.
-    #[arg(long, default_value = "1s", value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, default_value = "1s", value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub window: f64,
     /// Exit after this long (default: until Ctrl-C or the pipeline ends).
-    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub duration: Option<f64>,
 }
 

@@ -24,7 +24,7 @@ pub struct TeleopSourceArgs {
     #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
     pub rate_hz: f64,
     /// Run time (s); default: the CSV's length, or until Ctrl-C for synthetic motion.
-    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub duration: Option<f64>,
     /// Replay a recorded hand motion: CSV lines `t_s,x_m,y_m,z_m,qw,qx,qy,qz[,clutch[,grip]]`
     /// (a header line is skipped), sampled with linear interpolation.
@@ -52,7 +52,7 @@ pub struct TeleopSourceArgs {
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub ramp_mm: Option<String>,
     /// Duration of the --ramp-mm ramp (s).
-    #[arg(long, default_value_t = 2.0, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, default_value_t = 2.0, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub ramp_s: f64,
     /// Clutch released during these intervals, e.g. `3-5,8-9` (s); engaged otherwise.
     #[arg(long, value_name = "A-B,...")]

@@ -183,7 +183,7 @@ impl LogTail {
     pub fn poll(&mut self, read_wall_ns: u64, flush: bool, mut emit: impl FnMut(u64, Value)) {
         for t in &mut self.tails {
             if t.path.is_none() {
-                t.path = crate::supervisor::instance::run_file(
+                t.path = microrobot_supervisor::instance::run_file(
                     &self.instance,
                     &format!("{}.log", t.role),
                 )

@@ -222,7 +222,7 @@ mod tests {
     use std::path::Path;
 
     fn config(lockstep: bool) -> PipelineConfig {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../.."));
         let text = format!(
             "robot = \"config/robots/seed-arm.toml\"\nprogram = \"config/programs/seed-table4.toml\"\nlockstep = {lockstep}\n"
         );

@@ -18,7 +18,7 @@ use microrobot_messages::{
 use microrobot_model::{JointKind, Robot};
 use microrobot_runtime::PipelineConfig;
 
-use crate::supervisor::monitor::StatusMonitor;
+use microrobot_supervisor::monitor::StatusMonitor;
 
 /// Options of `microrobot send`.
 #[derive(Debug, clap::Args)]
@@ -29,10 +29,10 @@ pub struct SendArgs {
     /// Pipeline config whose robot checks targets before sending when the instance's
     /// own resolved config cannot be read (a running instance's robot is always the one
     /// it runs); skipped when neither exists.
-    #[arg(long, global = true, default_value_os_t = crate::config_path::default_config(), value_name = "FILE")]
+    #[arg(long, global = true, default_value_os_t = microrobot_command_line::config_path::default_config(), value_name = "FILE")]
     pub config: PathBuf,
     /// How long to wait for the planner (connection and verdict).
-    #[arg(long, global = true, default_value_t = 10.0, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, global = true, default_value_t = 10.0, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub timeout: f64,
     /// `move` and `stop`: return once the arm is holding again, with the motion's duration;
     /// an error (exit 7) if the motion ends any other way (another command took over, an
@@ -88,7 +88,7 @@ pub struct MoveArgs {
     #[arg(long, value_enum, default_value = "soft")]
     pub profile: Profile,
     /// Duration in s (required for cubic, quintic, lspb; for soft, 0 = time-optimal).
-    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse_or_zero)]
+    #[arg(long, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse_or_zero)]
     pub duration: Option<f64>,
     /// Scale (0, 1] of the robot's velocity, acceleration and jerk limits.
     #[arg(long, default_value_t = 1.0, value_name = "SCALE")]
@@ -204,7 +204,12 @@ pub fn build_command(args: &SendArgs, robot: Option<&Robot>) -> anyhow::Result<M
                             (false, JointKind::Revolute) => (1.0, " rad"),
                             (false, JointKind::Prismatic) => (1.0, " m"),
                         };
-                        let u = |x: f64| format!("{}{unit}", crate::check::trim_number(x * scale));
+                        let u = |x: f64| {
+                            format!(
+                                "{}{unit}",
+                                microrobot_supervisor::check::trim_number(x * scale)
+                            )
+                        };
                         ensure!(
                             l.contains(*v),
                             "--joints: {} target {} is outside its range [{}, {}]",
@@ -254,9 +259,9 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
         args.timeout
     );
     // The robot the running instance runs, from the config its supervisor resolved.
-    let running = !crate::supervisor::instance::live_nodes(&args.instance).is_empty();
+    let running = !microrobot_supervisor::instance::live_nodes(&args.instance).is_empty();
     let resolved = if running {
-        Some(crate::supervisor::instance::run_file(
+        Some(microrobot_supervisor::instance::run_file(
             &args.instance,
             "pipeline.resolved.toml",
         )?)
@@ -387,7 +392,7 @@ pub fn main(args: SendArgs) -> anyhow::Result<()> {
                     } else {
                         String::new()
                     };
-                    return Err(crate::exit::with_code(
+                    return Err(microrobot_command_line::exit::with_code(
                         microrobot_runtime::exit_code::JOB_FAILED,
                     )(anyhow::anyhow!(
                         "the planner of `{instance}` refused the command (seq {}): {why}{detail}",
@@ -473,9 +478,9 @@ fn wait_for_hold(
     accepted: &microrobot_messages::ServiceStatus,
 ) -> anyhow::Result<()> {
     let failed = |why: String| {
-        crate::exit::with_code(microrobot_runtime::exit_code::JOB_FAILED)(anyhow::anyhow!(
-            "the motion did not finish: {why}"
-        ))
+        microrobot_command_line::exit::with_code(microrobot_runtime::exit_code::JOB_FAILED)(
+            anyhow::anyhow!("the motion did not finish: {why}"),
+        )
     };
     let mut last_status = Instant::now();
     let mut pending = vec![*accepted];
@@ -553,7 +558,10 @@ fn refusal_detail(
                 "-∞".to_string()
             }
         } else {
-            format!("{}{base}{per}", crate::check::trim_number(x * scale))
+            format!(
+                "{}{base}{per}",
+                microrobot_supervisor::check::trim_number(x * scale)
+            )
         }
     };
     format!(

@@ -22,9 +22,9 @@ use microrobot_model::{JointKind, JointVector, ModelData, Robot};
 use microrobot_runtime::PipelineConfig;
 use serde::Serialize;
 
-use crate::supervisor::instance;
-use crate::supervisor::monitor::StatusMonitor;
-use crate::supervisor::summary::lifecycle_name;
+use microrobot_supervisor::instance;
+use microrobot_supervisor::monitor::StatusMonitor;
+use microrobot_supervisor::summary::lifecycle_name;
 
 /// Options of `microrobot top`.
 #[derive(Debug, clap::Args)]
@@ -39,10 +39,10 @@ pub struct TopArgs {
     #[arg(long)]
     pub json: bool,
     /// Refresh period in s.
-    #[arg(long, default_value_t = 1.0, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, default_value_t = 1.0, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub interval: f64,
     /// Give up if no service reports within this many seconds.
-    #[arg(long, default_value_t = 5.0, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, default_value_t = 5.0, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub timeout: f64,
 }
 
@@ -105,7 +105,7 @@ const ORDER: [ServiceRole; 3] = [
 fn rows(monitor: &StatusMonitor) -> Vec<Row> {
     let mut out = Vec::new();
     for role in ORDER {
-        let Some(seen) = monitor.latest[crate::supervisor::monitor::slot(role)] else {
+        let Some(seen) = monitor.latest[microrobot_supervisor::monitor::slot(role)] else {
             continue;
         };
         let st = seen.status;

@@ -35,13 +35,13 @@ pub struct TeleopReportArgs {
     #[arg(long, default_value = "default", value_name = "NAME")]
     pub instance: String,
     /// The pipeline's config (robot, `[teleop]` ratio and frame).
-    #[arg(long, default_value_os_t = crate::config_path::default_config(), value_name = "FILE")]
+    #[arg(long, default_value_os_t = microrobot_command_line::config_path::default_config(), value_name = "FILE")]
     pub config: PathBuf,
     /// How long to listen (s).
-    #[arg(long, default_value_t = 10.0, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, default_value_t = 10.0, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub duration: f64,
     /// Seconds at the start of the engaged stretch left out (filter transient).
-    #[arg(long, default_value_t = 1.0, value_name = "DURATION", value_parser = crate::duration::parse_or_zero)]
+    #[arg(long, default_value_t = 1.0, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse_or_zero)]
     pub settle: f64,
     /// Voluntary frequency (Hz); default: the strongest hand motion in 0.2–2 Hz.
     #[arg(long, value_name = "HZ")]
@@ -592,7 +592,7 @@ pub fn main(args: TeleopReportArgs) -> anyhow::Result<()> {
         println!("  result: {}", if v.pass { "PASS" } else { "FAIL" });
     }
     if !v.pass {
-        return Err(crate::exit::with_code(
+        return Err(microrobot_command_line::exit::with_code(
             microrobot_runtime::exit_code::JOB_FAILED,
         )(anyhow::anyhow!(
             "teleop report: a check failed (see the verdict)"
