@@ -13,7 +13,7 @@ use std::sync::LazyLock;
 use clap::{Parser, Subcommand};
 use microrobot_bus_tools::recording::{export, plot, record, recover, replay};
 use microrobot_bus_tools::{inspect, send, teleop_report, teleop_source, top};
-use microrobot_cli::{probe_chain, soak};
+use microrobot_soak::{self as soak, probe_chain};
 use microrobot_study::{self as study, eval_model, eval_trajectory, robot_cmd};
 use microrobot_supervisor::{binaries, check, driver_check, run};
 

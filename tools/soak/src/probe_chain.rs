@@ -1,5 +1,5 @@
 //! `microrobot probe-chain`: the machine's floor for the pipeline's end-to-end latency
-//! and CPU cost, measured the way [`crate::run`]'s `--floor-probe` measures the timer
+//! and CPU cost, measured the way [`microrobot_supervisor::run`]'s `--floor-probe` measures the timer
 //! floor for lateness.
 //!
 //! Three processes, started from this binary, with the pipeline's real-time settings
@@ -30,19 +30,19 @@ use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::{PeriodicClock, Reactor};
 use serde::{Deserialize, Serialize};
 
-use crate::supervisor::summary::Percentiles;
+use microrobot_supervisor::summary::Percentiles;
 
 /// Arguments of `microrobot probe-chain`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ProbeChainArgs {
     /// Pipeline config whose real-time settings and rate the chain uses.
-    #[arg(long, default_value_os_t = crate::config_path::default_config())]
+    #[arg(long, default_value_os_t = microrobot_command_line::config_path::default_config())]
     pub config: PathBuf,
     /// Tick rate in Hz (overrides `rate_hz`).
     #[arg(long)]
     pub rate_hz: Option<f64>,
     /// How long the source ticks (e.g. 60s, 10m).
-    #[arg(long, default_value = "60s", value_parser = crate::duration::parse)]
+    #[arg(long, default_value = "60s", value_parser = microrobot_command_line::duration::parse)]
     pub duration: f64,
     /// Also write the result as JSON to this file (as `run --summary-json`; `--json`
     /// is an alias).

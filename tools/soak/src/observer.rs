@@ -285,7 +285,7 @@ pub struct Checker {
 }
 
 fn role_slot(role: ServiceRole) -> usize {
-    crate::supervisor::monitor::slot(role)
+    microrobot_supervisor::monitor::slot(role)
 }
 
 impl Checker {

@@ -1,3 +1,7 @@
+//! The long runs and measurements of the live stack: `microrobot soak` (below) and
+//! `microrobot probe-chain` ([`probe_chain`], the machine's floor for the pipeline's
+//! latency and CPU).
+//!
 //! `microrobot soak`: runs the real pipeline (the supervisor of `microrobot run`, with
 //! the restart policy) for minutes to hours, keeps the arm moving, optionally injects
 //! faults (kill -9 of a service in turn, random motion commands, CPU load), watches the
@@ -8,6 +12,7 @@
 
 pub mod inject;
 pub mod observer;
+pub mod probe_chain;
 pub mod report;
 
 use std::collections::BTreeMap;
@@ -23,10 +28,10 @@ use microrobot_runtime::config::{FailurePolicy, RealtimeConfig};
 use microrobot_runtime::exit_code;
 use microrobot_runtime::timer::{FloorReport, floor_probe_windows};
 
-use crate::run::{self, Control, Hooks, RunArgs};
-use crate::supervisor::summary::Percentiles;
 use inject::{CommandPort, CpuLoad, Rng, Targets};
 use microrobot_bus_tools::invariants::{self, Bounds};
+use microrobot_supervisor::run::{self, Control, Hooks, RunArgs};
+use microrobot_supervisor::summary::Percentiles;
 use observer::Observer;
 use report::{Facts, Floor, Kill, Report};
 
@@ -34,25 +39,25 @@ use report::{Facts, Floor, Kill, Report};
 #[derive(Debug, Clone, clap::Args)]
 pub struct SoakArgs {
     /// Pipeline config (its program is replaced by the soak's own motion commands).
-    #[arg(long, default_value_os_t = crate::config_path::default_config())]
+    #[arg(long, default_value_os_t = microrobot_command_line::config_path::default_config())]
     pub config: PathBuf,
     /// How long: `90s`, `10m`, `1h` (a bare number is seconds).
-    #[arg(long, default_value = "60s", value_parser = crate::duration::parse)]
+    #[arg(long, default_value = "60s", value_parser = microrobot_command_line::duration::parse)]
     pub duration: f64,
     /// Control rate in Hz (overrides `rate_hz`).
     #[arg(long, value_name = "HZ")]
     pub rate_hz: Option<f64>,
     /// kill -9 a service every SECS seconds, in turn planner, dynamics, actuator; the
     /// supervisor restarts it.
-    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub kill_every: Option<f64>,
     /// Stop a service (SIGSTOP) every SECS seconds, in turn planner, dynamics, actuator,
     /// and continue it (SIGCONT) after `--stall-for`; a stall of at least
     /// `supervisor.hung_ms` must be caught as hung (killed and restarted).
-    #[arg(long, value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub stall_every: Option<f64>,
     /// How long each stall lasts.
-    #[arg(long, default_value = "1s", value_name = "DURATION", value_parser = crate::duration::parse)]
+    #[arg(long, default_value = "1s", value_name = "DURATION", value_parser = microrobot_command_line::duration::parse)]
     pub stall_for: f64,
     /// Random valid moves (replanning mid-motion) and stops, besides the motion cycle.
     #[arg(long)]

@@ -11,8 +11,8 @@ use anyhow::Context as _;
 use serde::{Deserialize, Serialize};
 
 use super::observer::{Edge, EdgeKind, Loss, Observed, ResourceSample};
-use crate::supervisor::summary::{Percentiles, Summary};
 use microrobot_bus_tools::invariants::Jump;
+use microrobot_supervisor::summary::{Percentiles, Summary};
 
 /// After a fault has recovered, lost messages are still attributed to it for this long
 /// (statuses arrive at ~10 Hz and count a gap when the next message comes).
@@ -111,7 +111,7 @@ pub struct Resources {
 }
 
 /// The timer floor measured alongside (the same figures as `microrobot run --floor-probe`).
-pub use crate::supervisor::summary::Floor;
+pub use microrobot_supervisor::summary::Floor;
 
 /// Pass/fail and why.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
