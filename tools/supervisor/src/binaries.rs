@@ -4,7 +4,7 @@
 //! executable, and only if they come from the same build.
 //!
 //! Every binary of the `microrobot` package (and `microrobot-view`) embeds the build id
-//! that the package `microrobot-build-id` (`tools/build-id`) computes from the sources
+//! that the package `microrobot-build-id` (`services/build-id`) computes from the sources
 //! (`microrobot-<role> --build-id` prints it). A service binary that is missing, or
 //! whose id is not this CLI's, is a binary of another build: when this
 //! process runs under `cargo run` (Cargo's environment for this package is set), Cargo is

@@ -12,7 +12,7 @@
 use std::path::{Path, PathBuf};
 
 fn main() {
-    // This package is `tools/build-id` of the workspace.
+    // This package is `services/build-id` of the workspace.
     let manifest_dir = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
     let root = manifest_dir
         .ancestors()
