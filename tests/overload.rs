@@ -13,10 +13,10 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use common::continuity::{
-    Limits, segments, setpoint_jumps, torque_peak, torque_slew, torque_step_bound, torque_steps,
-};
 use common::*;
+use microrobot_bus_tools::invariants::{
+    segments, setpoint_jumps, torque_peak, torque_slew, torque_step_bound, torque_steps,
+};
 use microrobot_messages::{LifecycleState, ServiceRole, monotonic_ns, state_flags};
 
 const PERIOD_S: f64 = 1e-3;
@@ -130,7 +130,7 @@ fn saturated_cores_degrade_the_pipeline_visibly_but_never_make_it_jump() {
     let streams = rec.finish();
     let s = summary(&summary_path);
 
-    let lim = Limits::seed_arm();
+    let lim = seed_arm_limits();
     let rep = setpoint_jumps(&streams.setpoints, &streams.states, &lim, PERIOD_S);
     assert!(
         rep.jumps.is_empty(),

@@ -7,8 +7,8 @@ mod common;
 
 use std::time::Duration;
 
-use common::continuity::{Limits, setpoint_jumps};
 use common::*;
+use microrobot_bus_tools::invariants::setpoint_jumps;
 use microrobot_messages::ServiceRole;
 
 const RATE_HZ: f64 = 4000.0;
@@ -82,7 +82,7 @@ fn a_20_ms_stall_at_4_khz_loses_nothing_and_moves_nothing_abruptly() {
     let report = setpoint_jumps(
         &streams.setpoints,
         &streams.states,
-        &Limits::seed_arm(),
+        &seed_arm_limits(),
         1.0 / RATE_HZ,
     );
     assert!(report.jumps.is_empty(), "{:#?}", report.jumps);

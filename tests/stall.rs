@@ -13,7 +13,6 @@ mod common;
 
 use std::time::Duration;
 
-use common::continuity::Limits;
 use common::*;
 use microrobot_messages::{JointState, LifecycleState, ServiceRole, monotonic_ns, state_flags};
 
@@ -56,7 +55,7 @@ fn a_frozen_actuator_wakes_holding_without_a_lurch_and_flags_the_stall() {
     let rec = Recorder::start(&inst);
     let proc = start_holding(&inst, &cfg, 90, Some(&summary_path));
     let actuator = pid_of(&inst, ServiceRole::Actuator).expect("actuator's pid");
-    let lim = Limits::seed_arm();
+    let lim = seed_arm_limits();
 
     let mut wakes = Vec::new();
     for (stall_ms, target) in [(300, "40,40,40,40,40,40"), (2000, "-20,-20,10,-20,-20,-20")] {

@@ -1,13 +1,14 @@
 //! `microrobot-dynamics --config FILE`: the dynamics service, one of the three real-time
-//! processes that `microrobot run` starts. It links only the service and the runtime,
-//! so the process that runs (and locks into memory) the cycle holds nothing else.
+//! processes that `microrobot run` starts. It links only the service, the runtime
+//! and the build id, so the process that runs (and locks into memory) the cycle holds
+//! nothing else.
 
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
     microrobot_runtime::service_binary_main(
         microrobot_runtime::ServiceRole::Dynamics,
-        env!("MICROROBOT_BUILD_ID"),
+        microrobot_build_id::BUILD_ID,
         microrobot_dynamics::run,
     )
 }

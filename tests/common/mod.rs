@@ -3,8 +3,6 @@
 //! from the test process, read the summary.
 #![allow(dead_code)]
 
-pub mod continuity;
-
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -88,6 +86,12 @@ pub fn table4_program() -> PathBuf {
 /// The seed arm.
 pub fn seed_arm() -> PathBuf {
     repo().join("config/robots/seed-arm.toml")
+}
+
+/// The limits of the seed arm, for the stream invariants.
+pub fn seed_arm_limits() -> microrobot_bus_tools::invariants::Limits {
+    let robot = microrobot_model::Robot::from_file(&seed_arm()).expect("seed arm");
+    microrobot_bus_tools::invariants::Limits::of(&robot)
 }
 
 /// Top-level config lines that run the seed's Table 4 program in lockstep.

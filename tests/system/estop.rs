@@ -7,8 +7,8 @@
 
 use std::time::Duration;
 
-use crate::common::continuity::{Limits, setpoint_jumps};
 use crate::common::*;
+use microrobot_bus_tools::invariants::setpoint_jumps;
 use microrobot_messages::{CommandKind, LifecycleState, ServiceRole, monotonic_ns, setpoint_flags};
 use microrobot_trajectory::{JointVector, KinematicLimits, MotionState as Start, stop_trajectory};
 
@@ -74,7 +74,7 @@ fn estop_mid_motion_stops_every_joint_on_the_shortest_jerk_limited_stop() {
     let streams = rec.finish();
     let sp = &streams.setpoints;
 
-    let lim = Limits::seed_arm();
+    let lim = seed_arm_limits();
     let rep = setpoint_jumps(sp, &streams.states, &lim, PERIOD_S);
     assert!(
         rep.jumps.is_empty(),
@@ -214,7 +214,7 @@ fn a_reset_during_the_estop_brake_does_not_step_the_setpoint() {
         before.flags,
         before.qd
     );
-    let rep = setpoint_jumps(sp, &streams.states, &Limits::seed_arm(), PERIOD_S);
+    let rep = setpoint_jumps(sp, &streams.states, &seed_arm_limits(), PERIOD_S);
     assert!(
         rep.jumps.is_empty(),
         "setpoint jumps:\n{}",
@@ -230,7 +230,7 @@ fn a_flood_of_random_commands_keeps_the_setpoints_continuous() {
     let dir = tempfile::tempdir().expect("tempdir");
     let inst = instance("estop-flood");
     let cfg = write_config(dir.path(), &inst, "", "");
-    let lim = Limits::seed_arm();
+    let lim = seed_arm_limits();
     let rec = Recorder::start(&inst);
     let proc = start_holding(&inst, &cfg, 120, None);
     let mut cmds = CommandSender::open(&inst);

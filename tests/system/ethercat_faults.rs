@@ -20,9 +20,9 @@ use microrobot_messages::{
     state_flags,
 };
 
-use crate::common::continuity::segments;
 use crate::common::*;
 use crate::ethercat_rig::{DriveStatus, Rig, RigOptions};
+use microrobot_bus_tools::invariants::segments;
 
 /// The driver's own fault codes (`master::codes` of the driver).
 const BUS_LOST: u32 = 0x00EC_0001;

@@ -9,11 +9,10 @@
 
 use std::time::Duration;
 
-use crate::common::continuity::{
-    Limits, segments, setpoint_jumps, state_at, torque_peak, torque_slew, torque_step_bound,
-    torque_steps,
-};
 use crate::common::*;
+use microrobot_bus_tools::invariants::{
+    segments, setpoint_jumps, state_at, torque_peak, torque_slew, torque_step_bound, torque_steps,
+};
 use microrobot_messages::{
     LifecycleState, ServiceRole, monotonic_ns, setpoint_flags, state_flags, torque_flags,
 };
@@ -126,7 +125,7 @@ fn kill_mid_motion(test: &str, victim: ServiceRole) -> Case {
 /// measured state allowed), no torque step, resumed from the measured state, the resumed
 /// motion completed and tracked.
 fn common_checks(c: &Case, victim: ServiceRole) {
-    let lim = Limits::seed_arm();
+    let lim = seed_arm_limits();
     let s = &c.summary;
     assert_eq!(s["services"][victim.name()]["restarts"], 1, "{s}");
     assert!(

@@ -4,8 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
-use microrobot_cli::study::{self, StudyArgs};
 use microrobot_model::{ModelData, Robot, rnea};
+use microrobot_study::{self as study, StudyArgs};
 use microrobot_trajectory::{
     JointVector, KinematicLimits, MotionRequest, MotionState, Profile, Trajectory, minimum_duration,
 };

@@ -8,18 +8,28 @@
 use std::ffi::OsString;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::LazyLock;
 
 use clap::{Parser, Subcommand};
-use microrobot_cli::recording::{export, plot, record, recover, replay};
-use microrobot_cli::{
-    check, driver_check, eval_model, eval_trajectory, inspect, probe_chain, robot_cmd, run, send,
-    soak, study, teleop_report, teleop_source, top,
-};
+use microrobot_bus_tools::recording::{export, plot, record, recover, replay};
+use microrobot_bus_tools::{inspect, send, teleop_report, teleop_source, top};
+use microrobot_soak::{self as soak, probe_chain};
+use microrobot_study::{self as study, eval_model, eval_trajectory, robot_cmd};
+use microrobot_supervisor::{binaries, check, driver_check, run};
+
+/// `--version`: the package version and the build id.
+static VERSION: LazyLock<String> = LazyLock::new(|| {
+    format!(
+        "{} (build {})",
+        env!("CARGO_PKG_VERSION"),
+        microrobot_build_id::BUILD_ID
+    )
+});
 
 #[derive(Parser)]
 #[command(
     name = "microrobot",
-    version = concat!(env!("CARGO_PKG_VERSION"), " (build ", env!("MICROROBOT_BUILD_ID"), ")"),
+    version = VERSION.as_str(),
     about = "Real-time motion stack for a 6-DOF surgical arm"
 )]
 struct Cli {
@@ -148,10 +158,10 @@ enum EvalCommand {
 }
 
 /// Replaces this process with `microrobot-view ARGS` of this build (see
-/// `supervisor::binaries`); returns only on failure.
+/// `microrobot_supervisor::binaries`); returns only on failure.
 fn view(args: Vec<OsString>) -> anyhow::Result<()> {
     use std::os::unix::process::CommandExt as _;
-    let path = microrobot_cli::supervisor::binaries::locate_view()?;
+    let path = binaries::locate_view()?;
     let err = std::process::Command::new(&path).args(args).exec();
     Err(anyhow::anyhow!("cannot run {}: {err}", path.display()))
 }
@@ -192,7 +202,9 @@ fn main() -> ExitCode {
         Command::Replay(args) => replay::main(args),
         Command::Recover(args) => recover::main(args),
         Command::Eval(EvalCommand::Model { robot, method }) => eval_model::run(&robot, method),
-        Command::Eval(EvalCommand::Trajectory) => eval_trajectory::run(),
+        Command::Eval(EvalCommand::Trajectory) => {
+            eval_trajectory::run().map_err(eval_model::exit_code_of_refused)
+        }
         Command::Robot(cmd) => robot_cmd::main(cmd),
         Command::Completions { shell } => {
             let mut cmd = <Cli as clap::CommandFactory>::command();
@@ -204,7 +216,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::from(microrobot_cli::exit::code_of(&e))
+            ExitCode::from(microrobot_command_line::exit::code_of(&e))
         }
     }
 }

@@ -1,8 +1,8 @@
-//! The `microrobot eval trajectory` line protocol (tools/src/eval_trajectory.rs),
+//! The `microrobot eval trajectory` line protocol (tools/study/src/eval_trajectory.rs),
 //! compiled here against this crate so it is tested with the library.
 
 #[allow(dead_code)]
-#[path = "../../../tools/src/eval_trajectory.rs"]
+#[path = "../../../tools/study/src/eval_trajectory.rs"]
 mod eval_trajectory;
 
 use eval_trajectory::eval_line;

@@ -19,9 +19,9 @@ use std::sync::Arc;
 use anyhow::{Context as _, Result, anyhow};
 use clap::Parser;
 use foxglove::{ChannelBuilder, PartialMetadata, RawChannel, Schema, WebSocketServer};
-use microrobot_cli::recording::tap::{self, BusTap, Payload, Received, Wake};
-use microrobot_cli::recording::viewer::{self, Feed, Periods};
-use microrobot_cli::recording::{self as recording, logs};
+use microrobot_bus_tools::recording::tap::{self, BusTap, Payload, Received, Wake};
+use microrobot_bus_tools::recording::viewer::{self, Feed, Periods};
+use microrobot_bus_tools::recording::{self as recording, logs};
 use microrobot_messages::monotonic_ns;
 use microrobot_runtime::Shutdown;
 
@@ -140,7 +140,7 @@ fn serve(args: Args) -> Result<()> {
     // iceoryx2's own notices (e.g. "no config file was loaded") only on request.
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     tap::check_instance(&args.instance)?;
-    microrobot_cli::inspect::require_running(&args.instance)?;
+    microrobot_bus_tools::inspect::require_running(&args.instance)?;
     nice_process(10);
     let shutdown = Shutdown::new().context("cannot create the shutdown eventfd")?;
     shutdown
@@ -253,14 +253,14 @@ fn serve(args: Args) -> Result<()> {
 fn main() -> ExitCode {
     let args = Args::parse();
     if args.build_id {
-        println!("{}", microrobot_cli::supervisor::binaries::BUILD_ID);
+        println!("{}", microrobot_build_id::BUILD_ID);
         return ExitCode::SUCCESS;
     }
     match serve(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::from(microrobot_cli::exit::code_of(&e))
+            ExitCode::from(microrobot_command_line::exit::code_of(&e))
         }
     }
 }
