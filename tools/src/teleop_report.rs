@@ -474,7 +474,7 @@ pub fn main(args: TeleopReportArgs) -> anyhow::Result<()> {
         "--settle {}: must be >= 0 s",
         args.settle
     );
-    let cfg = PipelineConfig::load(&args.config).map_err(anyhow::Error::new)?;
+    let cfg = microrobot_config::load(&args.config).map_err(anyhow::Error::new)?;
     let robot = Robot::from_file(&cfg.robot)
         .map_err(|e| anyhow::anyhow!("{}: {e}", cfg.robot.display()))?;
     set_log_level_from_env_or(LogLevel::Error);

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use microrobot_actuator::{ActuatorCore, SimArm, initial_q};
-use microrobot_dynamics::DynamicsCore;
+use microrobot_dynamics::{DynamicsConfig, DynamicsCore};
 use microrobot_messages::{
     CommandKind, JointSetpoint, JointState, MotionCommand, ProfileKind, TargetSpace, TorqueCommand,
 };
@@ -23,6 +23,15 @@ fn lockstep_config() -> PipelineConfig {
         lockstep: true,
         ..Default::default()
     }
+}
+
+/// `[dynamics] feedback = false` in `cfg`.
+fn feed_forward_only(cfg: &mut PipelineConfig) {
+    DynamicsConfig {
+        feedback: false,
+        ..DynamicsConfig::default()
+    }
+    .store(cfg);
 }
 
 fn move_command(target: [f64; 6]) -> MotionCommand {
@@ -51,7 +60,8 @@ fn run_loop(cfg: &PipelineConfig, target: [f64; 6], steps: usize) -> Run {
     let robot = Robot::from_file(&cfg.robot).unwrap();
     let sim = SimArm::new(&robot, &cfg.actuator.sim, &initial_q(&robot, cfg));
     let mut act = ActuatorCore::new(sim, &robot, cfg).unwrap();
-    let mut dynamics = DynamicsCore::new(&robot, cfg);
+    let dynamics_cfg = DynamicsConfig::from_pipeline(cfg).unwrap();
+    let mut dynamics = DynamicsCore::new(&robot, cfg, &dynamics_cfg);
     let mut planner = PlannerCore::new(&robot, cfg, None);
     let mut now = 1_000_000u64;
     let mut clock = || {
@@ -120,7 +130,7 @@ fn heavier_links_feedback_stays_bounded_and_feed_forward_is_worse() {
     let mut cfg = lockstep_config();
     cfg.actuator.sim.mass_scale = 1.1;
     let fb = run_loop(&cfg, TARGET, STEPS);
-    cfg.dynamics.feedback = false;
+    feed_forward_only(&mut cfg);
     let ff = run_loop(&cfg, TARGET, STEPS);
     // The gravity of the extra 10 % is corrected only through Kp: ~1.0e-3 rad measured.
     assert!(
@@ -139,7 +149,7 @@ fn heavier_links_feedback_stays_bounded_and_feed_forward_is_worse() {
 #[test]
 fn feed_forward_alone_drifts_even_with_the_exact_model() {
     let mut cfg = lockstep_config();
-    cfg.dynamics.feedback = false;
+    feed_forward_only(&mut cfg);
     let ff = run_loop(&cfg, TARGET, STEPS);
     // Reported, not hidden: a held torque over each period is not the continuous
     // feed-forward torque, and nothing corrects the drift.

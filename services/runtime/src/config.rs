@@ -157,23 +157,6 @@ pub struct PlannerConfig {
     pub clock: PlannerClock,
 }
 
-/// `[dynamics]`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct DynamicsConfig {
-    /// Computed-torque feedback on the measured state (false: feed-forward RNEA only).
-    pub feedback: bool,
-    /// Predict the measured state one period ahead before the feedback (it is one period
-    /// older than the setpoint).
-    pub delay_compensation: bool,
-    /// Position gain Kp (1/s²).
-    pub kp_per_s2: f64,
-    /// Velocity gain Kd (1/s).
-    pub kd_per_s: f64,
-    /// Minimum time for a commanded torque to change by the joint's full effort limit
-    /// (ms); 0 = no slew limit.
-    pub torque_slew_ms: f64,
-}
-
 /// `[actuator.sim]`: the simulated arm.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimConfig {
@@ -253,7 +236,31 @@ pub struct SupervisorConfig {
     pub hung_ms: f64,
 }
 
-/// The whole pipeline configuration, fully validated.
+/// The sections of the file that a service crate owns: their structs, defaults and
+/// readers live with the code that uses them (`[dynamics]` in `microrobot-dynamics`,
+/// ...). The runtime checks only that each is a table and keeps it raw in
+/// [`PipelineConfig::sections`]; `microrobot-config` reads the whole file through every
+/// owner.
+pub const OWNED_SECTIONS: [&str; 1] = ["dynamics"];
+
+/// The owned sections of a config ([`OWNED_SECTIONS`]) as raw TOML tables, with the
+/// name of the file they came from so that their owners' errors name it. Equal when the
+/// tables are: the file name is where a config came from, not part of it.
+#[derive(Debug, Clone, Default)]
+pub struct Sections {
+    file: String,
+    tables: Table,
+}
+
+impl PartialEq for Sections {
+    fn eq(&self, other: &Self) -> bool {
+        self.tables == other.tables
+    }
+}
+
+/// The whole pipeline configuration: the runtime's keys validated, the owned sections
+/// raw until their owners read them (`microrobot_config::load` reads a file through
+/// every owner and stores each section back in full).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PipelineConfig {
     /// Instance name: the service-name prefix (`[A-Za-z0-9_-]`, 1..=64 chars).
@@ -272,11 +279,13 @@ pub struct PipelineConfig {
     pub status_period_ms: f64,
     pub watchdog: WatchdogConfig,
     pub planner: PlannerConfig,
-    pub dynamics: DynamicsConfig,
     pub actuator: ActuatorConfig,
     pub realtime: RealtimeConfig,
     pub supervisor: SupervisorConfig,
     pub teleop: TeleopConfig,
+    /// The owned sections ([`OWNED_SECTIONS`]), read by their owners
+    /// ([`PipelineConfig::section`]).
+    pub sections: Sections,
 }
 
 impl Default for PipelineConfig {
@@ -303,13 +312,6 @@ impl Default for PipelineConfig {
                 estop_limit_scale: 1.0,
                 command_max_age_ms: 1000.0,
                 clock: PlannerClock::Timer,
-            },
-            dynamics: DynamicsConfig {
-                feedback: true,
-                delay_compensation: true,
-                kp_per_s2: 2500.0,
-                kd_per_s: 100.0,
-                torque_slew_ms: 20.0,
             },
             actuator: ActuatorConfig {
                 backend: BackendKind::Sim,
@@ -346,14 +348,17 @@ impl Default for PipelineConfig {
                 hung_ms: 500.0,
             },
             teleop: TeleopConfig::default(),
+            sections: Sections::default(),
         }
     }
 }
 
 impl PipelineConfig {
-    /// Reads and validates a pipeline config file; relative paths inside are resolved
-    /// against the file's directory. Errors name the file and the key.
-    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+    /// Reads a pipeline config file and validates the runtime's keys, keeping the owned
+    /// sections raw ([`OWNED_SECTIONS`]; `microrobot_config::load` reads them through
+    /// their owners too); relative paths inside are resolved against the file's
+    /// directory. Errors name the file and the key.
+    pub fn load_runtime_keys(path: &Path) -> Result<Self, ConfigError> {
         let origin = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
             file: origin.clone(),
@@ -369,12 +374,17 @@ impl PipelineConfig {
         } else {
             base
         };
-        Self::from_toml_str(&text, &origin, &base)
+        Self::runtime_keys_from_toml_str(&text, &origin, &base)
     }
 
-    /// Parses and validates config text; `origin` names it in errors, `base_dir` resolves
-    /// relative paths (made absolute when `base_dir` exists).
-    pub fn from_toml_str(text: &str, origin: &str, base_dir: &Path) -> Result<Self, ConfigError> {
+    /// Parses config text and validates the runtime's keys, keeping the owned sections
+    /// raw (as [`PipelineConfig::load_runtime_keys`]); `origin` names it in errors,
+    /// `base_dir` resolves relative paths (made absolute when `base_dir` exists).
+    pub fn runtime_keys_from_toml_str(
+        text: &str,
+        origin: &str,
+        base_dir: &Path,
+    ) -> Result<Self, ConfigError> {
         let table: Table = text.parse().map_err(|e: toml::de::Error| ConfigError {
             file: origin.to_string(),
             key: None,
@@ -383,6 +393,20 @@ impl PipelineConfig {
         let r = Reader { file: origin };
         let base = std::fs::canonicalize(base_dir).unwrap_or_else(|_| base_dir.to_path_buf());
         r.pipeline(&table, &base)
+    }
+
+    /// The owned section `name` ([`OWNED_SECTIONS`]) as a key-path table of the file it
+    /// came from, for its owner to read (absent: an empty table, every key absent).
+    pub fn section(&self, name: &str) -> Result<KeyTable<'_>, KeyError> {
+        KeyTable::root(&self.sections.file, &self.sections.tables).opt_table(name)
+    }
+
+    /// Stores `table` as the owned section `name`: its owner's effective values, so that
+    /// [`PipelineConfig::to_toml_string`] writes every key of it.
+    pub fn set_section(&mut self, name: &str, table: Table) {
+        self.sections
+            .tables
+            .insert(name.to_string(), Value::Table(table));
     }
 
     /// The control period in ns (`1e9 / rate_hz`, rounded).
@@ -408,7 +432,8 @@ impl PipelineConfig {
     }
 
     /// Serialises the (validated) config back to TOML with absolute paths, so the text
-    /// is self-contained: `from_toml_str(to_toml_string())` gives the same config.
+    /// is self-contained: reading it back (`microrobot_config::from_toml_str`) gives the
+    /// same config.
     pub fn to_toml_string(&self) -> String {
         let mut s = String::new();
         let f = |v: f64| fmt_f64(v);
@@ -444,13 +469,6 @@ impl PipelineConfig {
                 PlannerClock::ActuatorState => "actuator_state",
             })
         );
-        let d = &self.dynamics;
-        let _ = writeln!(s, "\n[dynamics]");
-        let _ = writeln!(s, "feedback = {}", d.feedback);
-        let _ = writeln!(s, "delay_compensation = {}", d.delay_compensation);
-        let _ = writeln!(s, "kp_per_s2 = {}", f(d.kp_per_s2));
-        let _ = writeln!(s, "kd_per_s = {}", f(d.kd_per_s));
-        let _ = writeln!(s, "torque_slew_ms = {}", f(d.torque_slew_ms));
         let a = &self.actuator;
         let _ = writeln!(s, "\n[actuator]");
         let _ = writeln!(s, "backend = \"sim\"");
@@ -514,6 +532,9 @@ impl PipelineConfig {
         let _ = writeln!(s, "max_restarts = {}", v.max_restarts);
         let _ = writeln!(s, "hung_ms = {}", f(v.hung_ms));
         teleop::write_toml(&self.teleop, &mut s);
+        if !self.sections.tables.is_empty() {
+            let _ = write!(s, "\n{}", self.sections.tables);
+        }
         s
     }
 }
@@ -716,38 +737,16 @@ impl Reader<'_> {
             )?,
         };
 
-        let t = top.section(
-            "dynamics",
-            &[
-                "feedback",
-                "delay_compensation",
-                "kp_per_s2",
-                "kd_per_s",
-                "torque_slew_ms",
-            ],
-        )?;
-        let dd = &d.dynamics;
-        let dynamics = DynamicsConfig {
-            feedback: t.bool_or("feedback", dd.feedback)?,
-            delay_compensation: t.bool_or("delay_compensation", dd.delay_compensation)?,
-            kp_per_s2: t.number_in("kp_per_s2", dd.kp_per_s2, Range::closed(0.0, 1.0e7))?,
-            kd_per_s: t.number_in("kd_per_s", dd.kd_per_s, Range::closed(0.0, 1.0e5))?,
-            torque_slew_ms: t.number_in(
-                "torque_slew_ms",
-                dd.torque_slew_ms,
-                Range::closed(0.0, 10_000.0),
-            )?,
-        };
-        // Discrete stability of the computed-torque loop at this rate (one-period delay).
-        if dynamics.kd_per_s / rate_hz > 1.0 || dynamics.kp_per_s2 / (rate_hz * rate_hz) > 0.5 {
-            return Err(self.err(
-                "dynamics.kp_per_s2",
-                format!(
-                    "gains Kp {} /s², Kd {} /s are too high for {rate_hz} Hz (need Kd/rate <= 1, Kp/rate² <= 0.5)",
-                    dynamics.kp_per_s2, dynamics.kd_per_s
-                ),
-            ));
+        let mut tables = Table::new();
+        for name in OWNED_SECTIONS {
+            if let Some(t) = top.opt_table(name)?.raw() {
+                tables.insert(name.to_string(), Value::Table(t.clone()));
+            }
         }
+        let sections = Sections {
+            file: self.file.to_string(),
+            tables,
+        };
 
         let t = top.section(
             "actuator",
@@ -987,154 +986,11 @@ impl Reader<'_> {
             status_period_ms,
             watchdog,
             planner,
-            dynamics,
             actuator,
             realtime,
             supervisor,
             teleop: self.teleop(&top, rate_hz)?,
+            sections,
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn dir_with_robot() -> (PathBuf, PathBuf) {
-        let dir =
-            std::env::temp_dir().join(format!("mr-cfg-{}-{}", std::process::id(), rand_suffix()));
-        std::fs::create_dir_all(dir.join("robots")).unwrap();
-        let robot = dir.join("robots/seed-arm.toml");
-        std::fs::write(&robot, "# placeholder\n").unwrap();
-        (dir, robot)
-    }
-
-    fn rand_suffix() -> u64 {
-        use std::sync::atomic::{AtomicU64, Ordering};
-        static N: AtomicU64 = AtomicU64::new(0);
-        N.fetch_add(1, Ordering::Relaxed)
-    }
-
-    fn parse(text: &str) -> Result<PipelineConfig, ConfigError> {
-        let (dir, _) = dir_with_robot();
-        PipelineConfig::from_toml_str(text, "pipeline.toml", &dir)
-    }
-
-    fn err_key(text: &str) -> (Option<String>, String) {
-        let e = parse(text).unwrap_err();
-        assert_eq!(e.file, "pipeline.toml");
-        let msg = e.to_string();
-        assert!(msg.starts_with("pipeline.toml: "), "{msg}");
-        (e.key, msg)
-    }
-
-    #[test]
-    fn empty_file_gives_defaults_with_resolved_robot() {
-        let c = parse("").unwrap();
-        assert_eq!(c.rate_hz, 1000.0);
-        assert!(c.robot.is_absolute());
-        assert!(c.robot.ends_with("robots/seed-arm.toml"));
-        assert_eq!(c.watchdog.stale_ms, 50.0);
-        assert_eq!(c.realtime.cpu_affinity, vec![1]);
-    }
-
-    #[test]
-    fn unknown_key_is_refused_with_its_path() {
-        assert_eq!(err_key("rate = 5").0.as_deref(), Some("rate"));
-        assert_eq!(
-            err_key("[watchdog]\nstale = 5").0.as_deref(),
-            Some("watchdog.stale")
-        );
-        assert_eq!(
-            err_key("[actuator.sim]\nmass = 1.0").0.as_deref(),
-            Some("actuator.sim.mass")
-        );
-        assert_eq!(err_key("[bogus]").0.as_deref(), Some("bogus"));
-    }
-
-    #[test]
-    fn wrong_type_non_finite_and_out_of_range_name_the_key() {
-        assert_eq!(err_key("rate_hz = \"fast\"").0.as_deref(), Some("rate_hz"));
-        assert_eq!(err_key("rate_hz = nan").0.as_deref(), Some("rate_hz"));
-        assert_eq!(err_key("rate_hz = inf").0.as_deref(), Some("rate_hz"));
-        assert_eq!(err_key("rate_hz = 0").0.as_deref(), Some("rate_hz"));
-        assert_eq!(
-            err_key("[watchdog]\nstale_ms = -1").0.as_deref(),
-            Some("watchdog.stale_ms")
-        );
-        assert_eq!(
-            err_key("[watchdog]\nfault_ms = 10").0.as_deref(),
-            Some("watchdog.fault_ms")
-        );
-        assert_eq!(
-            err_key("[watchdog]\nsafe_state = \"run\"").0.as_deref(),
-            Some("watchdog.safe_state")
-        );
-        assert_eq!(
-            err_key("[dynamics]\nfeedback = 1").0.as_deref(),
-            Some("dynamics.feedback")
-        );
-        assert_eq!(
-            err_key("[realtime]\nsched_fifo_priority = 100")
-                .0
-                .as_deref(),
-            Some("realtime.sched_fifo_priority")
-        );
-        assert_eq!(
-            err_key("[actuator.sim]\nsubsteps = 0").0.as_deref(),
-            Some("actuator.sim.substeps")
-        );
-        assert_eq!(err_key("instance = \"a/b\"").0.as_deref(), Some("instance"));
-        assert_eq!(
-            err_key("program = \"nope.toml\"").0.as_deref(),
-            Some("program")
-        );
-        assert_eq!(
-            err_key("[planner]\nlimit_scale = 1.5").0.as_deref(),
-            Some("planner.limit_scale")
-        );
-        // Denormal and tiny scales: refused like a command's, named, with the range.
-        for (text, key) in [
-            ("[planner]\nlimit_scale = 1e-300", "planner.limit_scale"),
-            ("[planner]\nlimit_scale = 0.0009", "planner.limit_scale"),
-            (
-                "[planner]\nestop_limit_scale = 1e-300",
-                "planner.estop_limit_scale",
-            ),
-        ] {
-            let (k, msg) = err_key(text);
-            assert_eq!(k.as_deref(), Some(key), "{text}");
-            assert!(msg.contains("[0.001, 1]"), "{text}: {msg}");
-        }
-        assert!(parse("[planner]\nlimit_scale = 0.001").is_ok());
-    }
-
-    #[test]
-    fn syntax_error_names_the_file() {
-        let e = parse("rate_hz = = 3").unwrap_err();
-        assert_eq!(e.key, None);
-        assert!(e.to_string().contains("pipeline.toml"));
-    }
-
-    #[test]
-    fn too_high_gains_for_the_rate_are_refused() {
-        let (k, _) =
-            err_key("rate_hz = 100\n[watchdog]\nstale_ms = 50\n[dynamics]\nkp_per_s2 = 10000");
-        assert_eq!(k.as_deref(), Some("dynamics.kp_per_s2"));
-    }
-
-    #[test]
-    fn round_trip_through_toml_is_exact() {
-        let c = parse(
-            "instance = \"lab-1\"\nrate_hz = 4000.0\nduration_s = 2.5\nlockstep = true\n\
-             [watchdog]\nsafe_state = \"damp\"\nauto_resume = true\n\
-             [actuator]\ncommand = [\"drv\", \"--x\"]\n[actuator.sim]\nmass_scale = 1.1\ninitial_q_deg = [10, 20.5]\nintegrator = \"semi_implicit_euler\"\n\
-             [realtime]\ncpu_affinity = []\noverrun = \"catch_up\"\n[supervisor]\non_failure = \"restart\"",
-        )
-        .unwrap();
-        let text = c.to_toml_string();
-        let back =
-            PipelineConfig::from_toml_str(&text, "re.toml", Path::new("/nonexistent")).unwrap();
-        assert_eq!(back, c);
     }
 }

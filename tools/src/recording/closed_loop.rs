@@ -12,7 +12,7 @@
 
 use anyhow::{Context as _, Result, anyhow, bail};
 use microrobot_actuator::{ActuatorCore, SimArm, initial_q};
-use microrobot_dynamics::DynamicsCore;
+use microrobot_dynamics::{DynamicsConfig, DynamicsCore};
 use microrobot_messages::{JointSetpoint, JointState, TorqueCommand};
 use microrobot_planner::PlannerCore;
 use microrobot_planner::program::ProgramRunner;
@@ -77,7 +77,7 @@ impl ClosedLoop {
         planner.accept_state(&state, PUBLISHER, now_ns);
         Ok(Self {
             planner,
-            dynamics: DynamicsCore::new(&robot, cfg),
+            dynamics: DynamicsCore::new(&robot, cfg, &DynamicsConfig::from_pipeline(cfg)?),
             actuator,
             state,
             now_ns,
@@ -226,7 +226,7 @@ mod tests {
         let text = format!(
             "robot = \"config/robots/seed-arm.toml\"\nprogram = \"config/programs/seed-table4.toml\"\nlockstep = {lockstep}\n"
         );
-        match PipelineConfig::from_toml_str(&text, "test.toml", root) {
+        match microrobot_config::from_toml_str(&text, "test.toml", root) {
             Ok(c) => c,
             Err(e) => panic!("{e}"),
         }
