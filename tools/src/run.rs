@@ -21,7 +21,7 @@ use microrobot_messages::{
     Activity, LifecycleState, ProgramEnd, ProgramState, ServiceRole, ServiceStatus, monotonic_ns,
 };
 use microrobot_model::Robot;
-use microrobot_runtime::config::FailurePolicy;
+use microrobot_runtime::config::{FailurePolicy, OwnedSection as _};
 use microrobot_runtime::{PipelineConfig, exit_code};
 
 use crate::supervisor::binaries::ServiceBinaries;
@@ -380,7 +380,9 @@ pub fn resolve_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
         overridden = true;
     }
     if let Some(m) = args.mass_scale {
-        cfg.actuator.sim.mass_scale = m;
+        let mut actuator = microrobot_actuator::ActuatorConfig::from_pipeline(&cfg)?;
+        actuator.sim.mass_scale = m;
+        actuator.store(&mut cfg);
         overridden = true;
     }
     if overridden {
@@ -529,7 +531,10 @@ fn launch_for(
     resolved: &Path,
     run_dir: &Path,
 ) -> Launch {
-    let argv = match (&cfg.actuator.command, role) {
+    let command = microrobot_actuator::ActuatorConfig::from_pipeline(cfg)
+        .ok()
+        .and_then(|a| a.command);
+    let argv = match (&command, role) {
         (Some(cmd), ServiceRole::Actuator) => driver_argv(cmd, cfg, resolved, run_dir),
         _ => vec![
             binaries.path(role).display().to_string(),

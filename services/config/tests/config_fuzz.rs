@@ -4,8 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
+use microrobot_actuator::ActuatorConfig;
 use microrobot_config::{from_toml_str, load};
 use microrobot_dynamics::DynamicsConfig;
+use microrobot_runtime::config::OwnedSection;
 use proptest::prelude::*;
 
 fn config_dir() -> PathBuf {
@@ -22,7 +24,8 @@ fn check(text: &str) {
             assert!(c.rate_hz.is_finite() && c.rate_hz > 0.0);
             assert!(c.watchdog.stale_ms.is_finite() && c.watchdog.fault_ms >= c.watchdog.stale_ms);
             let dynamics = DynamicsConfig::from_pipeline(&c).unwrap();
-            assert!(dynamics.kp_per_s2.is_finite() && c.actuator.sim.mass_scale.is_finite());
+            let actuator = ActuatorConfig::from_pipeline(&c).unwrap();
+            assert!(dynamics.kp_per_s2.is_finite() && actuator.sim.mass_scale.is_finite());
             // What loads also round-trips.
             let back = from_toml_str(&c.to_toml_string(), "re.toml", Path::new("/")).unwrap();
             assert_eq!(back, c);

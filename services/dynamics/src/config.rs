@@ -2,11 +2,8 @@
 //! raw section the runtime hands out ([`PipelineConfig::section`]).
 
 use microrobot_keypath::Range;
-use microrobot_runtime::config::{ConfigError, PipelineConfig};
+use microrobot_runtime::config::{ConfigError, OwnedSection, PipelineConfig};
 use toml::Table;
-
-/// The section's name in the pipeline file.
-pub const SECTION: &str = "dynamics";
 
 /// `[dynamics]`.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,12 +35,14 @@ impl Default for DynamicsConfig {
     }
 }
 
-impl DynamicsConfig {
+impl OwnedSection for DynamicsConfig {
+    const NAME: &'static str = "dynamics";
+
     /// Reads `[dynamics]` of `cfg`: every key checked (unknown ones refused), absent ones
     /// defaulted, and the gains checked for discrete stability at `cfg.rate_hz`. Errors
     /// name the file and the key.
-    pub fn from_pipeline(cfg: &PipelineConfig) -> Result<Self, ConfigError> {
-        let t = cfg.section(SECTION)?;
+    fn from_pipeline(cfg: &PipelineConfig) -> Result<Self, ConfigError> {
+        let t = cfg.section(Self::NAME)?;
         t.allow(&[
             "feedback",
             "delay_compensation",
@@ -79,9 +78,7 @@ impl DynamicsConfig {
         Ok(dynamics)
     }
 
-    /// The section with every key, in the file's units: what
-    /// [`PipelineConfig::set_section`] stores so that the effective config is complete.
-    pub fn to_table(&self) -> Table {
+    fn to_table(&self) -> Table {
         let mut t = Table::new();
         t.insert("feedback".into(), self.feedback.into());
         t.insert("delay_compensation".into(), self.delay_compensation.into());
@@ -89,19 +86,5 @@ impl DynamicsConfig {
         t.insert("kd_per_s".into(), self.kd_per_s.into());
         t.insert("torque_slew_ms".into(), self.torque_slew_ms.into());
         t
-    }
-
-    /// Stores this as `[dynamics]` of `cfg`, every key (a command-line override, or
-    /// the effective values after a check).
-    pub fn store(&self, cfg: &mut PipelineConfig) {
-        cfg.set_section(SECTION, self.to_table());
-    }
-
-    /// Reads `[dynamics]` of `cfg` ([`DynamicsConfig::from_pipeline`]) and stores it back
-    /// with every key.
-    pub fn check(cfg: &mut PipelineConfig) -> Result<Self, ConfigError> {
-        let d = Self::from_pipeline(cfg)?;
-        d.store(cfg);
-        Ok(d)
     }
 }

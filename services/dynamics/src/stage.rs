@@ -6,7 +6,7 @@ use microrobot_messages::{
     JointSetpoint, JointState, LifecycleState, RefusalReason, ServiceRole, ServiceStatus,
     TorqueCommand, monotonic_ns, topic,
 };
-use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::config::{OwnedSection, PipelineConfig};
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::Refusal;
 use microrobot_runtime::{

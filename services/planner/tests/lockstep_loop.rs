@@ -4,14 +4,14 @@
 
 use std::path::PathBuf;
 
-use microrobot_actuator::{ActuatorCore, SimArm, initial_q};
+use microrobot_actuator::{ActuatorConfig, ActuatorCore, SimArm, initial_q};
 use microrobot_dynamics::{DynamicsConfig, DynamicsCore};
 use microrobot_messages::{
     CommandKind, JointSetpoint, JointState, MotionCommand, ProfileKind, TargetSpace, TorqueCommand,
 };
 use microrobot_model::Robot;
 use microrobot_planner::PlannerCore;
-use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::config::{OwnedSection, PipelineConfig};
 
 fn robot_path() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml")
@@ -58,8 +58,13 @@ struct Run {
 /// per message) so whole messages can be compared.
 fn run_loop(cfg: &PipelineConfig, target: [f64; 6], steps: usize) -> Run {
     let robot = Robot::from_file(&cfg.robot).unwrap();
-    let sim = SimArm::new(&robot, &cfg.actuator.sim, &initial_q(&robot, cfg));
-    let mut act = ActuatorCore::new(sim, &robot, cfg).unwrap();
+    let actuator_cfg = ActuatorConfig::from_pipeline(cfg).unwrap();
+    let sim = SimArm::new(
+        &robot,
+        &actuator_cfg.sim,
+        &initial_q(&robot, &actuator_cfg.sim),
+    );
+    let mut act = ActuatorCore::new(sim, &robot, cfg, &actuator_cfg).unwrap();
     let dynamics_cfg = DynamicsConfig::from_pipeline(cfg).unwrap();
     let mut dynamics = DynamicsCore::new(&robot, cfg, &dynamics_cfg);
     let mut planner = PlannerCore::new(&robot, cfg, None);
@@ -128,7 +133,9 @@ fn exact_model_with_feedback_tracks_within_1e_5_rad() {
 #[test]
 fn heavier_links_feedback_stays_bounded_and_feed_forward_is_worse() {
     let mut cfg = lockstep_config();
-    cfg.actuator.sim.mass_scale = 1.1;
+    let mut actuator = ActuatorConfig::default();
+    actuator.sim.mass_scale = 1.1;
+    actuator.store(&mut cfg);
     let fb = run_loop(&cfg, TARGET, STEPS);
     feed_forward_only(&mut cfg);
     let ff = run_loop(&cfg, TARGET, STEPS);

@@ -75,22 +75,6 @@ pub enum PlannerClock {
     ActuatorState,
 }
 
-/// Numerical integrator of the simulated arm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Integrator {
-    /// Classic 4th-order Runge-Kutta on (q, qd) with the torque held constant.
-    Rk4,
-    /// Semi-implicit (symplectic) Euler: qd += qdd·h, then q += qd·h.
-    SemiImplicitEuler,
-}
-
-/// Actuator backend kind.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BackendKind {
-    /// The simulated arm (forward dynamics of the robot model).
-    Sim,
-}
-
 /// What the supervisor does when a service dies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FailurePolicy {
@@ -157,49 +141,6 @@ pub struct PlannerConfig {
     pub clock: PlannerClock,
 }
 
-/// `[actuator.sim]`: the simulated arm.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SimConfig {
-    /// Link masses and inertias multiplied by this (1.1 = links 10 % heavier than the model).
-    pub mass_scale: f64,
-    /// Extra viscous friction on every joint, unknown to the dynamics (N·m·s/rad).
-    pub viscous_friction_nms: f64,
-    /// Extra Coulomb friction on every joint, unknown to the dynamics (N·m).
-    pub coulomb_friction_nm: f64,
-    /// Standard deviation of Gaussian noise on measured positions (rad).
-    pub sensor_noise_rad: f64,
-    /// Standard deviation of Gaussian noise on measured velocities (rad/s).
-    pub sensor_noise_rad_s: f64,
-    /// Integrator.
-    pub integrator: Integrator,
-    /// Integrator substeps per plant step.
-    pub substeps: u32,
-    /// Seed of the noise generator (same seed, same noise).
-    pub seed: u64,
-    /// Initial joint positions (deg, or mm for prismatic joints); `None`: all zero
-    /// (clamped into the joint limits). Converted to SI by the simulator.
-    pub initial_q_deg: Option<Vec<f64>>,
-}
-
-/// `[actuator]`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ActuatorConfig {
-    /// Backend kind.
-    pub backend: BackendKind,
-    /// External driver process run by the supervisor in place of the actuator service
-    /// (program and arguments); `None`: the built-in actuator service.
-    pub command: Option<Vec<String>>,
-    /// Safe-state hold gain (1/s²).
-    pub hold_kp_per_s2: f64,
-    /// Safe-state hold / damping gain (1/s).
-    pub hold_kd_per_s: f64,
-    /// Minimum time for the applied torque to change by the joint's full effort limit
-    /// (ms), a drive's torque slope; 0 = none.
-    pub torque_slope_ms: f64,
-    /// The simulated arm.
-    pub sim: SimConfig,
-}
-
 /// `[realtime]`: per-process real-time settings, each falling back with one warning.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RealtimeConfig {
@@ -238,10 +179,39 @@ pub struct SupervisorConfig {
 
 /// The sections of the file that a service crate owns: their structs, defaults and
 /// readers live with the code that uses them (`[dynamics]` in `microrobot-dynamics`,
-/// ...). The runtime checks only that each is a table and keeps it raw in
+/// `[actuator]` in `microrobot-actuator`). The runtime checks only that each is a table and keeps it raw in
 /// [`PipelineConfig::sections`]; `microrobot-config` reads the whole file through every
 /// owner.
-pub const OWNED_SECTIONS: [&str; 1] = ["dynamics"];
+pub const OWNED_SECTIONS: [&str; 2] = ["dynamics", "actuator"];
+
+/// A section of the file owned by a service crate ([`OWNED_SECTIONS`]): its struct,
+/// defaults and reader live with the code that uses it.
+pub trait OwnedSection: Sized {
+    /// The section's name in the file (`dynamics`).
+    const NAME: &'static str;
+
+    /// Reads the section of `cfg` ([`PipelineConfig::section`]): every key checked
+    /// (unknown ones refused), absent ones defaulted, units converted. Errors name the
+    /// file and the key.
+    fn from_pipeline(cfg: &PipelineConfig) -> Result<Self, ConfigError>;
+
+    /// The section with every key, in the file's units (what [`OwnedSection::store`]
+    /// stores, so that the effective config is complete).
+    fn to_table(&self) -> Table;
+
+    /// Stores this as the section of `cfg`, every key: a command-line override, or the
+    /// effective values after a check.
+    fn store(&self, cfg: &mut PipelineConfig) {
+        cfg.set_section(Self::NAME, self.to_table());
+    }
+
+    /// Reads the section of `cfg` and stores it back with every key.
+    fn check(cfg: &mut PipelineConfig) -> Result<Self, ConfigError> {
+        let section = Self::from_pipeline(cfg)?;
+        section.store(cfg);
+        Ok(section)
+    }
+}
 
 /// The owned sections of a config ([`OWNED_SECTIONS`]) as raw TOML tables, with the
 /// name of the file they came from so that their owners' errors name it. Equal when the
@@ -279,7 +249,6 @@ pub struct PipelineConfig {
     pub status_period_ms: f64,
     pub watchdog: WatchdogConfig,
     pub planner: PlannerConfig,
-    pub actuator: ActuatorConfig,
     pub realtime: RealtimeConfig,
     pub supervisor: SupervisorConfig,
     pub teleop: TeleopConfig,
@@ -312,24 +281,6 @@ impl Default for PipelineConfig {
                 estop_limit_scale: 1.0,
                 command_max_age_ms: 1000.0,
                 clock: PlannerClock::Timer,
-            },
-            actuator: ActuatorConfig {
-                backend: BackendKind::Sim,
-                command: None,
-                hold_kp_per_s2: 400.0,
-                hold_kd_per_s: 40.0,
-                torque_slope_ms: 10.0,
-                sim: SimConfig {
-                    mass_scale: 1.0,
-                    viscous_friction_nms: 0.0,
-                    coulomb_friction_nm: 0.0,
-                    sensor_noise_rad: 0.0,
-                    sensor_noise_rad_s: 0.0,
-                    integrator: Integrator::Rk4,
-                    substeps: 1,
-                    seed: 1,
-                    initial_q_deg: None,
-                },
             },
             realtime: RealtimeConfig {
                 cpu_affinity: vec![1],
@@ -469,37 +420,6 @@ impl PipelineConfig {
                 PlannerClock::ActuatorState => "actuator_state",
             })
         );
-        let a = &self.actuator;
-        let _ = writeln!(s, "\n[actuator]");
-        let _ = writeln!(s, "backend = \"sim\"");
-        if let Some(cmd) = &a.command {
-            let items: Vec<String> = cmd.iter().map(|c| quote(c)).collect();
-            let _ = writeln!(s, "command = [{}]", items.join(", "));
-        }
-        let _ = writeln!(s, "hold_kp_per_s2 = {}", f(a.hold_kp_per_s2));
-        let _ = writeln!(s, "hold_kd_per_s = {}", f(a.hold_kd_per_s));
-        let _ = writeln!(s, "torque_slope_ms = {}", f(a.torque_slope_ms));
-        let m = &a.sim;
-        let _ = writeln!(s, "\n[actuator.sim]");
-        let _ = writeln!(s, "mass_scale = {}", f(m.mass_scale));
-        let _ = writeln!(s, "viscous_friction_nms = {}", f(m.viscous_friction_nms));
-        let _ = writeln!(s, "coulomb_friction_nm = {}", f(m.coulomb_friction_nm));
-        let _ = writeln!(s, "sensor_noise_rad = {}", f(m.sensor_noise_rad));
-        let _ = writeln!(s, "sensor_noise_rad_s = {}", f(m.sensor_noise_rad_s));
-        let _ = writeln!(
-            s,
-            "integrator = {}",
-            quote(match m.integrator {
-                Integrator::Rk4 => "rk4",
-                Integrator::SemiImplicitEuler => "semi_implicit_euler",
-            })
-        );
-        let _ = writeln!(s, "substeps = {}", m.substeps);
-        let _ = writeln!(s, "seed = {}", m.seed);
-        if let Some(q) = &m.initial_q_deg {
-            let items: Vec<String> = q.iter().map(|v| f(*v)).collect();
-            let _ = writeln!(s, "initial_q_deg = [{}]", items.join(", "));
-        }
         let r = &self.realtime;
         let _ = writeln!(s, "\n[realtime]");
         let cpus: Vec<String> = r.cpu_affinity.iter().map(|c| c.to_string()).collect();
@@ -749,130 +669,6 @@ impl Reader<'_> {
         };
 
         let t = top.section(
-            "actuator",
-            &[
-                "backend",
-                "command",
-                "hold_kp_per_s2",
-                "hold_kd_per_s",
-                "torque_slope_ms",
-                "sim",
-            ],
-        )?;
-        let da = &d.actuator;
-        let backend = t.choice("backend", da.backend, &[("sim", BackendKind::Sim)])?;
-        let command = match t.get("command") {
-            None => None,
-            Some(Value::Array(items)) => {
-                let mut out = Vec::with_capacity(items.len());
-                for (i, it) in items.iter().enumerate() {
-                    match it {
-                        Value::String(s) if !s.is_empty() => out.push(s.clone()),
-                        _ => {
-                            return Err(self.err(
-                                &format!("actuator.command[{i}]"),
-                                "expected a non-empty string",
-                            ));
-                        }
-                    }
-                }
-                if out.is_empty() {
-                    return Err(self.err("actuator.command", "must name a program"));
-                }
-                Some(out)
-            }
-            Some(_) => return Err(self.err("actuator.command", "expected an array of strings")),
-        };
-        let hold_kp_per_s2 = t.number_in(
-            "hold_kp_per_s2",
-            da.hold_kp_per_s2,
-            Range::closed(0.0, 1.0e7),
-        )?;
-        let hold_kd_per_s = t.number_in(
-            "hold_kd_per_s",
-            da.hold_kd_per_s,
-            Range::left_open(0.0, 1.0e5),
-        )?;
-        let torque_slope_ms = t.number_in(
-            "torque_slope_ms",
-            da.torque_slope_ms,
-            Range::closed(0.0, 10_000.0),
-        )?;
-        let s = t.section(
-            "sim",
-            &[
-                "mass_scale",
-                "viscous_friction_nms",
-                "coulomb_friction_nm",
-                "sensor_noise_rad",
-                "sensor_noise_rad_s",
-                "integrator",
-                "substeps",
-                "seed",
-                "initial_q_deg",
-            ],
-        )?;
-        let ds = &da.sim;
-        let initial_q_deg = match s.get("initial_q_deg") {
-            None => None,
-            Some(Value::Array(items)) => {
-                if items.is_empty() || items.len() > 8 {
-                    return Err(self.err("actuator.sim.initial_q_deg", "expected 1 to 8 numbers"));
-                }
-                let mut out = Vec::with_capacity(items.len());
-                for (i, it) in items.iter().enumerate() {
-                    out.push(s.number_of(it, format!("actuator.sim.initial_q_deg[{i}]"))?);
-                }
-                Some(out)
-            }
-            Some(_) => {
-                return Err(self.err("actuator.sim.initial_q_deg", "expected an array of numbers"));
-            }
-        };
-        let sim = SimConfig {
-            mass_scale: s.number_in("mass_scale", ds.mass_scale, Range::closed(0.1, 10.0))?,
-            viscous_friction_nms: s.number_in(
-                "viscous_friction_nms",
-                ds.viscous_friction_nms,
-                Range::closed(0.0, 1.0e4),
-            )?,
-            coulomb_friction_nm: s.number_in(
-                "coulomb_friction_nm",
-                ds.coulomb_friction_nm,
-                Range::closed(0.0, 1.0e4),
-            )?,
-            sensor_noise_rad: s.number_in(
-                "sensor_noise_rad",
-                ds.sensor_noise_rad,
-                Range::closed(0.0, 1.0),
-            )?,
-            sensor_noise_rad_s: s.number_in(
-                "sensor_noise_rad_s",
-                ds.sensor_noise_rad_s,
-                Range::closed(0.0, 10.0),
-            )?,
-            integrator: s.choice(
-                "integrator",
-                ds.integrator,
-                &[
-                    ("rk4", Integrator::Rk4),
-                    ("semi_implicit_euler", Integrator::SemiImplicitEuler),
-                ],
-            )?,
-            substeps: s.integer_in("substeps", ds.substeps as u64, 1, 1000)? as u32,
-            seed: s.integer_in("seed", ds.seed, 0, i64::MAX as u64)?,
-            initial_q_deg,
-        };
-        let actuator = ActuatorConfig {
-            backend,
-            command,
-            hold_kp_per_s2,
-            hold_kd_per_s,
-            torque_slope_ms,
-            sim,
-        };
-
-        let t = top.section(
             "realtime",
             &[
                 "cpu_affinity",
@@ -986,7 +782,6 @@ impl Reader<'_> {
             status_period_ms,
             watchdog,
             planner,
-            actuator,
             realtime,
             supervisor,
             teleop: self.teleop(&top, rate_hz)?,

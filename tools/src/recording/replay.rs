@@ -19,6 +19,7 @@ use microrobot_dynamics::{DynamicsConfig, DynamicsCore};
 use microrobot_messages::{JointSetpoint, JointState, MAX_JOINTS, TorqueCommand};
 use microrobot_model::Robot;
 use microrobot_runtime::PipelineConfig;
+use microrobot_runtime::config::OwnedSection as _;
 use serde::Serialize;
 
 use super::closed_loop::{
