@@ -193,7 +193,7 @@ pub fn check_pipeline(cfg: &PipelineConfig) -> Findings {
             .push("program: none (the arm holds and takes `microrobot send` commands)".into());
         return f;
     };
-    if cfg.teleop.enabled {
+    if microrobot_planner::TeleopConfig::from_pipeline(cfg).is_ok_and(|t| t.enabled) {
         f.errors.push(format!(
             "program {} is set, but teleop.enabled = true: the planner would start in teleop mode and never run it (run with --no-program, or set teleop.enabled = false)",
             path.display()

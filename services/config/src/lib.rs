@@ -2,7 +2,8 @@
 //! runtime validates its own keys (instance, rate, robot, lockstep, watchdogs, real-time
 //! settings, ...) and hands out each owned section raw
 //! ([`microrobot_runtime::config::OWNED_SECTIONS`]); the crate that uses a section reads
-//! it (`[dynamics]`: [`DynamicsConfig`], `[actuator]`: [`ActuatorConfig`]) and stores it back with
+//! it (`[dynamics]`: [`DynamicsConfig`], `[actuator]`: [`ActuatorConfig`], `[teleop]`:
+//! [`TeleopConfig`]) and stores it back with
 //! every key, so that [`PipelineConfig::to_toml_string`] writes the effective config in
 //! full and reading that back gives the same config.
 //!
@@ -14,6 +15,7 @@ use std::path::Path;
 
 use microrobot_actuator::ActuatorConfig;
 use microrobot_dynamics::DynamicsConfig;
+use microrobot_planner::TeleopConfig;
 use microrobot_runtime::config::{ConfigError, OwnedSection, PipelineConfig};
 
 /// Reads every owned section of `cfg` through its owner and stores each back with every
@@ -21,6 +23,7 @@ use microrobot_runtime::config::{ConfigError, OwnedSection, PipelineConfig};
 pub fn check(cfg: &mut PipelineConfig) -> Result<(), ConfigError> {
     DynamicsConfig::check(cfg)?;
     ActuatorConfig::check(cfg)?;
+    TeleopConfig::check(cfg)?;
     Ok(())
 }
 

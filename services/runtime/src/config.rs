@@ -12,9 +12,6 @@ use std::path::{Path, PathBuf};
 use microrobot_keypath::{KeyError, Range, Table as KeyTable};
 use toml::{Table, Value};
 
-mod teleop;
-pub use teleop::TeleopConfig;
-
 /// Why a pipeline config was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{file}: {}{message}", key.as_deref().map(|k| format!("{k}: ")).unwrap_or_default())]
@@ -179,10 +176,10 @@ pub struct SupervisorConfig {
 
 /// The sections of the file that a service crate owns: their structs, defaults and
 /// readers live with the code that uses them (`[dynamics]` in `microrobot-dynamics`,
-/// `[actuator]` in `microrobot-actuator`). The runtime checks only that each is a table and keeps it raw in
+/// `[actuator]` in `microrobot-actuator`, `[teleop]` in `microrobot-planner`). The runtime checks only that each is a table and keeps it raw in
 /// [`PipelineConfig::sections`]; `microrobot-config` reads the whole file through every
 /// owner.
-pub const OWNED_SECTIONS: [&str; 2] = ["dynamics", "actuator"];
+pub const OWNED_SECTIONS: [&str; 3] = ["dynamics", "actuator", "teleop"];
 
 /// A section of the file owned by a service crate ([`OWNED_SECTIONS`]): its struct,
 /// defaults and reader live with the code that uses it.
@@ -251,7 +248,6 @@ pub struct PipelineConfig {
     pub planner: PlannerConfig,
     pub realtime: RealtimeConfig,
     pub supervisor: SupervisorConfig,
-    pub teleop: TeleopConfig,
     /// The owned sections ([`OWNED_SECTIONS`]), read by their owners
     /// ([`PipelineConfig::section`]).
     pub sections: Sections,
@@ -298,7 +294,6 @@ impl Default for PipelineConfig {
                 max_restarts: 3,
                 hung_ms: 500.0,
             },
-            teleop: TeleopConfig::default(),
             sections: Sections::default(),
         }
     }
@@ -451,7 +446,6 @@ impl PipelineConfig {
         );
         let _ = writeln!(s, "max_restarts = {}", v.max_restarts);
         let _ = writeln!(s, "hung_ms = {}", f(v.hung_ms));
-        teleop::write_toml(&self.teleop, &mut s);
         if !self.sections.tables.is_empty() {
             let _ = write!(s, "\n{}", self.sections.tables);
         }
@@ -784,7 +778,6 @@ impl Reader<'_> {
             planner,
             realtime,
             supervisor,
-            teleop: self.teleop(&top, rate_hz)?,
             sections,
         })
     }
