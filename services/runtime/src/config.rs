@@ -1,6 +1,9 @@
-//! The pipeline configuration (`config/pipeline.toml`): every key checked, units in
-//! the key names converted once at load, relative paths resolved against the file's
-//! directory. `config/pipeline.README.md` documents every key.
+//! The pipeline configuration (`config/pipeline.toml`): the pipeline-wide keys and the
+//! sections several processes read, every key checked, units in the key names
+//! converted once at load, relative paths resolved against the file's directory. The
+//! sections a single service crate uses ([`OWNED_SECTIONS`]) are handed out raw to their
+//! owners ([`OwnedSection`]); `microrobot-config` reads a whole file through all of them.
+//! `config/pipeline.README.md` documents every key.
 //!
 //! Errors name the file and the full key path (`watchdog.stale_ms`), so a user finds
 //! the typo. Unknown keys, wrong types, non-finite numbers and out-of-range values are
@@ -176,9 +179,13 @@ pub struct SupervisorConfig {
 
 /// The sections of the file that a service crate owns: their structs, defaults and
 /// readers live with the code that uses them (`[dynamics]` in `microrobot-dynamics`,
-/// `[actuator]` in `microrobot-actuator`, `[teleop]` in `microrobot-planner`). The runtime checks only that each is a table and keeps it raw in
+/// `[actuator]` in `microrobot-actuator`, `[teleop]` in `microrobot-planner`). The
+/// runtime checks only that each is a table and keeps it raw in
 /// [`PipelineConfig::sections`]; `microrobot-config` reads the whole file through every
-/// owner.
+/// owner. The other sections stay here: `[watchdog]`, `[planner]` (its `clock` sets the
+/// actuator's phase too) and `[realtime]` are read by several services, and
+/// `[supervisor]`, read by `microrobot run`, is checked by every service at start,
+/// which links no CLI code.
 pub const OWNED_SECTIONS: [&str; 3] = ["dynamics", "actuator", "teleop"];
 
 /// A section of the file owned by a service crate ([`OWNED_SECTIONS`]): its struct,
