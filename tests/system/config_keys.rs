@@ -7,7 +7,6 @@
 use std::path::{Path, PathBuf};
 
 use microrobot_model::Robot;
-use microrobot_runtime::PipelineConfig;
 use microrobot_trajectory::program::Program;
 use toml::{Table, Value};
 
@@ -204,7 +203,7 @@ fn check_every_key(file: &str, load: impl Fn(&str) -> Result<(), String>) -> (us
 #[test]
 fn every_pipeline_key_refuses_each_bad_class_naming_the_key() {
     let (n, failures) = check_every_key("pipeline.toml", |t| {
-        PipelineConfig::from_toml_str(t, "bad-pipeline.toml", &config_dir())
+        microrobot_config::from_toml_str(t, "bad-pipeline.toml", &config_dir())
             .map(|_| ())
             .map_err(|e| e.to_string())
     });
@@ -237,8 +236,8 @@ fn every_program_key_refuses_each_bad_class_naming_the_key() {
 /// The file is named in every error.
 #[test]
 fn errors_name_the_file() {
-    let e =
-        PipelineConfig::from_toml_str("rate_hz = nan", "f1.toml", Path::new("/")).expect_err("nan");
+    let e = microrobot_config::from_toml_str("rate_hz = nan", "f1.toml", Path::new("/"))
+        .expect_err("nan");
     assert!(e.to_string().starts_with("f1.toml"), "{e}");
     let e = Robot::from_toml_str("[robot]\nname = 1", "f2.toml").expect_err("type");
     assert!(e.to_string().starts_with("f2.toml"), "{e}");

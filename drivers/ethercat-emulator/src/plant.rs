@@ -2,9 +2,9 @@
 //! (the arm's forward dynamics) can drive the whole chain; values are joint-side SI
 //! units (rad, rad/s, N·m) and the drives convert to motor counts and per mille.
 
+use microrobot_actuator::config::Integrator;
 use microrobot_actuator::plant::ArmPlant;
 use microrobot_model::{JointVector, MAX_JOINTS, Robot};
-use microrobot_runtime::config::Integrator;
 
 /// A plant of `axes()` joints, stepped once per process data exchange.
 pub trait Plant: Send {

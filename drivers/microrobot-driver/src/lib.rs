@@ -162,6 +162,7 @@ where
     microrobot_runtime::service_main_with(
         microrobot_runtime::ServiceRole::Actuator,
         config,
+        microrobot_config::load,
         adjust,
         |cfg, shutdown| serve(cfg, shutdown, make_backend),
     )

@@ -23,6 +23,7 @@
 //! [`ActuatorCore::on_wake`].
 
 pub mod backend;
+pub mod config;
 pub mod lifecycle;
 pub mod plant;
 pub mod resume;
@@ -40,6 +41,7 @@ use microrobot_runtime::watchdog::{Freshness, Watchdog};
 use microrobot_runtime::{BadConfig, Shutdown};
 
 pub use backend::{ActuatorBackend, Fault, Measured};
+pub use config::{ActuatorConfig, SimConfig};
 pub use lifecycle::Lifecycle;
 pub use resume::{RESUME_ENV, ResumeState};
 pub use safety::{Mode, Safety};
@@ -102,9 +104,15 @@ pub struct ActuatorCore<B: ActuatorBackend> {
 
 impl<B: ActuatorBackend> ActuatorCore<B> {
     /// A core around an unconfigured `backend` (configured here), with the nominal
-    /// `model` for the safety layer's own control law. Refuses a backend that drives
-    /// another number of joints than `model` has.
-    pub fn new(backend: B, model: &Robot, cfg: &PipelineConfig) -> Result<Self, Fault> {
+    /// `model` for the safety layer's own control law, the `[actuator]` settings of
+    /// `actuator` and the rate and watchdog settings of `cfg`. Refuses a backend that
+    /// drives another number of joints than `model` has.
+    pub fn new(
+        backend: B,
+        model: &Robot,
+        cfg: &PipelineConfig,
+        actuator: &ActuatorConfig,
+    ) -> Result<Self, Fault> {
         if backend.dof() != model.dof() {
             return Err(Fault {
                 joint: None,
@@ -132,8 +140,8 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             }
         };
         let mut slope = JointVector::repeat(f64::INFINITY);
-        if cfg.actuator.torque_slope_ms > 0.0 {
-            let steps_per_full_scale = cfg.actuator.torque_slope_ms * 1e-3 / period_s;
+        if actuator.torque_slope_ms > 0.0 {
+            let steps_per_full_scale = actuator.torque_slope_ms * 1e-3 / period_s;
             for (i, j) in model.joints().iter().enumerate().take(slope.len()) {
                 slope[i] = j.limits.effort / steps_per_full_scale;
             }
@@ -142,8 +150,8 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             dof: model.dof(),
             safety: Safety::new(
                 model,
-                cfg.actuator.hold_kp_per_s2,
-                cfg.actuator.hold_kd_per_s,
+                actuator.hold_kp_per_s2,
+                actuator.hold_kd_per_s,
                 cfg.watchdog.safe_state,
                 ramp_steps,
             )
@@ -533,10 +541,11 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
     }
 }
 
-/// The robot's initial joint vector from `initial_q_deg` (deg for revolute, mm for prismatic).
-pub fn initial_q(robot: &Robot, cfg: &PipelineConfig) -> JointVector {
+/// The robot's initial joint vector from `initial_q_deg` of `sim` (deg for revolute, mm
+/// for prismatic), in SI (rad, m).
+pub fn initial_q(robot: &Robot, sim: &SimConfig) -> JointVector {
     let mut q = JointVector::zeros();
-    if let Some(v) = &cfg.actuator.sim.initial_q_deg {
+    if let Some(v) = &sim.initial_q_deg {
         for (i, j) in robot.joints().iter().enumerate() {
             let x = v.get(i).copied().unwrap_or(0.0);
             q[i] = match j.kind {
@@ -558,7 +567,7 @@ pub fn load_robot(cfg: &PipelineConfig) -> anyhow::Result<Robot> {
 pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     serve(cfg, shutdown, |setup: &Setup| {
         let start = &setup.start;
-        let mut sim = SimArm::new(setup.robot, &setup.cfg.actuator.sim, &start.q);
+        let mut sim = SimArm::new(setup.robot, &setup.actuator.sim, &start.q);
         if start.from == StartFrom::Restart {
             sim.set_state(&start.q, &start.qd);
         }

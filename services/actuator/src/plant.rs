@@ -8,8 +8,8 @@
 //!
 //! Allocation-free after construction.
 
+use crate::config::Integrator;
 use microrobot_model::{JointVector, MAX_JOINTS, ModelData, Robot, forward_dynamics};
-use microrobot_runtime::config::Integrator;
 
 /// Forward dynamics produced a non-finite state (a singular mass matrix, a runaway
 /// torque); the plant kept its last good state.

@@ -12,7 +12,7 @@ use microrobot_messages::{
     TorqueCommand, monotonic_ns, topic,
 };
 use microrobot_model::{JointVector, Robot};
-use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::config::{OwnedSection, PipelineConfig};
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::Refusal;
 use microrobot_runtime::{
@@ -20,7 +20,9 @@ use microrobot_runtime::{
     Subscription, Ticker, TimerFd,
 };
 
-use crate::{ActuatorBackend, ActuatorCore, ResumeState, initial_q, load_robot};
+use crate::{
+    ActuatorBackend, ActuatorConfig, ActuatorCore, ResumeState, SimConfig, initial_q, load_robot,
+};
 
 /// Where the arm is believed to be when the actuator starts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -51,8 +53,10 @@ pub struct StartState {
 /// the start state.
 #[derive(Debug, Clone, Copy)]
 pub struct Setup<'a> {
-    /// The pipeline config (rate, lockstep, watchdog, `[actuator]` …).
+    /// The pipeline config (rate, lockstep, watchdog …).
     pub cfg: &'a PipelineConfig,
+    /// `[actuator]` of it (the simulated arm, the safe-state gains, …).
+    pub actuator: &'a ActuatorConfig,
     /// The robot (joint names, kinds, limits, inertias).
     pub robot: &'a Robot,
     /// Where the arm is.
@@ -99,6 +103,7 @@ where
     F: FnOnce(&Setup) -> anyhow::Result<B>,
 {
     let robot = load_robot(cfg)?;
+    let actuator = ActuatorConfig::from_pipeline(cfg).map_err(|e| BadConfig(e.to_string()))?;
     let dof = robot.dof();
     microrobot_runtime::serve(cfg, shutdown, ServiceRole::Actuator, |setup| {
         let (node, inst) = (setup.node, setup.instance());
@@ -110,9 +115,10 @@ where
             topic::COMMAND,
             Subscription::CYCLIC.default_queue(),
         )?;
-        let start = start_state(cfg, &robot, setup.shutdown, node)?;
+        let start = start_state(cfg, &actuator.sim, &robot, setup.shutdown, node)?;
         let backend = make_backend(&Setup {
             cfg,
+            actuator: &actuator,
             robot: &robot,
             start: start.state,
         })
@@ -125,7 +131,8 @@ where
             ))
             .into());
         }
-        let mut core = ActuatorCore::new(backend, &robot, cfg).context("actuator backend")?;
+        let mut core =
+            ActuatorCore::new(backend, &robot, cfg, &actuator).context("actuator backend")?;
         if let Some(r) = &start.resume {
             core.resume_after_restart(&r.tau, !cfg.watchdog.auto_resume);
         }
@@ -169,13 +176,14 @@ struct Start {
 /// [`RESUME_PROBE_MS`]), else the config.
 fn start_state(
     cfg: &PipelineConfig,
+    sim: &SimConfig,
     robot: &Robot,
     shutdown: &Shutdown,
     node: &iceoryx2::prelude::Node<iceoryx2::prelude::ipc::Service>,
 ) -> anyhow::Result<Start> {
     let resume = ResumeState::from_env(robot).map_err(BadConfig)?;
     let mut state = StartState {
-        q: initial_q(robot, cfg),
+        q: initial_q(robot, sim),
         qd: JointVector::zeros(),
         from: StartFrom::Config,
     };

@@ -20,8 +20,8 @@
 //!
 //! Allocation-free after construction.
 
+use crate::config::SimConfig;
 use microrobot_model::{JointVector, Robot};
-use microrobot_runtime::config::SimConfig;
 
 use crate::backend::{ActuatorBackend, Fault, Measured};
 use crate::plant::ArmPlant;
@@ -211,7 +211,7 @@ impl ActuatorBackend for SimArm {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use microrobot_runtime::config::{Integrator, PipelineConfig};
+    use crate::config::Integrator;
 
     /// A pendulum: point mass 1 kg at 0.5 m, no gravity along the swing plane when
     /// gravity is zero; here gravity along −y with the arm along x.
@@ -233,10 +233,11 @@ link = {{ mass_kg = 1.0, com_mm = [0.0, 0.0, 0.0], inertia_kgmm2 = [[0.0, 0.0, 0
     }
 
     fn sim_cfg(integrator: Integrator, substeps: u32) -> SimConfig {
-        let mut c = PipelineConfig::default().actuator.sim;
-        c.integrator = integrator;
-        c.substeps = substeps;
-        c
+        SimConfig {
+            integrator,
+            substeps,
+            ..SimConfig::default()
+        }
     }
 
     fn active(robot: &Robot, cfg: &SimConfig) -> SimArm {

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use microrobot_actuator::{ActuatorCore, Mode, SimArm, initial_q};
+use microrobot_actuator::{ActuatorConfig, ActuatorCore, Mode, SimArm, initial_q};
 use microrobot_messages::{Header, LifecycleState, TorqueCommand, state_flags, torque_flags};
 use microrobot_model::Robot;
 use microrobot_runtime::config::PipelineConfig;
@@ -16,8 +16,9 @@ fn core() -> (ActuatorCore<SimArm>, Robot) {
         ..Default::default()
     };
     let robot = Robot::from_file(&cfg.robot).unwrap();
-    let sim = SimArm::new(&robot, &cfg.actuator.sim, &initial_q(&robot, &cfg));
-    (ActuatorCore::new(sim, &robot, &cfg).unwrap(), robot)
+    let a = ActuatorConfig::default();
+    let sim = SimArm::new(&robot, &a.sim, &initial_q(&robot, &a.sim));
+    (ActuatorCore::new(sim, &robot, &cfg, &a).unwrap(), robot)
 }
 
 fn torque(seq: u64, stamp_ns: u64) -> TorqueCommand {
@@ -196,8 +197,9 @@ fn lockstep_has_no_stalls() {
         ..Default::default()
     };
     let robot = Robot::from_file(&cfg.robot).unwrap();
-    let sim = SimArm::new(&robot, &cfg.actuator.sim, &initial_q(&robot, &cfg));
-    let mut c = ActuatorCore::new(sim, &robot, &cfg).unwrap();
+    let a = ActuatorConfig::default();
+    let sim = SimArm::new(&robot, &a.sim, &initial_q(&robot, &a.sim));
+    let mut c = ActuatorCore::new(sim, &robot, &cfg, &a).unwrap();
     c.accept_torque(&torque(1, MS), 1, MS).unwrap();
     c.step(MS);
     assert_eq!(c.on_wake(10_000 * MS), None);

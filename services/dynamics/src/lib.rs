@@ -24,8 +24,10 @@
 //! The computation lives in [`DynamicsCore`] (no IPC); the service's stage (its ports
 //! and wake-up) in `stage.rs`.
 
+pub mod config;
 mod stage;
 
+pub use config::DynamicsConfig;
 pub use stage::run;
 
 use microrobot_messages::{
@@ -84,8 +86,9 @@ pub struct DynamicsCore {
 }
 
 impl DynamicsCore {
-    /// A core for `robot` with the `[dynamics]` and watchdog settings of `cfg`.
-    pub fn new(robot: &Robot, cfg: &PipelineConfig) -> Self {
+    /// A core for `robot` with the settings of `dynamics` and the rate and watchdog
+    /// settings of `cfg`.
+    pub fn new(robot: &Robot, cfg: &PipelineConfig, dynamics: &DynamicsConfig) -> Self {
         let mut effort = [0.0; MAX_JOINTS];
         let mut bounds = JointBounds {
             q_min: [0.0; MAX_JOINTS],
@@ -99,8 +102,8 @@ impl DynamicsCore {
             bounds.qd_max[i] = j.limits.velocity;
         }
         let mut slew_per_tick = [f64::INFINITY; MAX_JOINTS];
-        if cfg.dynamics.torque_slew_ms > 0.0 {
-            let ticks_per_slew = cfg.dynamics.torque_slew_ms * 1e-3 * cfg.rate_hz;
+        if dynamics.torque_slew_ms > 0.0 {
+            let ticks_per_slew = dynamics.torque_slew_ms * 1e-3 * cfg.rate_hz;
             for i in 0..robot.dof() {
                 slew_per_tick[i] = effort[i] / ticks_per_slew;
             }
@@ -109,11 +112,11 @@ impl DynamicsCore {
             data: ModelData::new(robot),
             dof: robot.dof(),
             robot: robot.clone(),
-            feedback: cfg.dynamics.feedback,
-            predict: cfg.dynamics.delay_compensation,
+            feedback: dynamics.feedback,
+            predict: dynamics.delay_compensation,
             period_s: 1.0 / cfg.rate_hz,
-            kp: cfg.dynamics.kp_per_s2,
-            kd: cfg.dynamics.kd_per_s,
+            kp: dynamics.kp_per_s2,
+            kd: dynamics.kd_per_s,
             lockstep: cfg.lockstep,
             stale_ns: cfg.watchdog.stale_ns(),
             effort,

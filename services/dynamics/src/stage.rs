@@ -6,7 +6,7 @@ use microrobot_messages::{
     JointSetpoint, JointState, LifecycleState, RefusalReason, ServiceRole, ServiceStatus,
     TorqueCommand, monotonic_ns, topic,
 };
-use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::config::{OwnedSection, PipelineConfig};
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::Refusal;
 use microrobot_runtime::{
@@ -14,12 +14,13 @@ use microrobot_runtime::{
     Subscription, TimerFd, serve,
 };
 
-use crate::DynamicsCore;
+use crate::{DynamicsConfig, DynamicsCore};
 
 /// The dynamics service (`microrobot-dynamics`).
 pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
     let robot = microrobot_model::Robot::from_file(&cfg.robot)
         .map_err(|e| BadConfig(format!("robot file: {e}")))?;
+    let dynamics = DynamicsConfig::from_pipeline(cfg).map_err(|e| BadConfig(e.to_string()))?;
     serve(cfg, shutdown, ServiceRole::Dynamics, |setup| {
         let inst = setup.instance();
         let ports = Ports {
@@ -36,7 +37,7 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
         let period = microrobot_runtime::config::ms_to_ns(cfg.status_period_ms);
         ports.timer.arm_absolute(monotonic_ns() + period, period)?;
         let stage = DynamicsStage {
-            core: DynamicsCore::new(&robot, cfg),
+            core: DynamicsCore::new(&robot, cfg, &dynamics),
             latency: LatencyHistogram::new(),
             setpoint_to_awake: LatencyHistogram::new(),
             awake_to_torque: LatencyHistogram::new(),

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use microrobot_dynamics::DynamicsCore;
+use microrobot_dynamics::{DynamicsConfig, DynamicsCore};
 use microrobot_messages::{Header, JointSetpoint, JointState, state_flags, torque_flags};
 use microrobot_model::{JointVector, ModelData, Robot, rnea};
 use microrobot_runtime::config::PipelineConfig;
@@ -54,7 +54,7 @@ const Q: [f64; 6] = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6];
 fn on_the_setpoint_at_rest_feedback_equals_inverse_dynamics() {
     let c = cfg(false);
     let robot = Robot::from_file(&c.robot).unwrap();
-    let mut d = DynamicsCore::new(&robot, &c);
+    let mut d = DynamicsCore::new(&robot, &c, &DynamicsConfig::default());
     let now = 1000 * MS;
     d.accept_state(&state(1, 0, now, Q), 9, 0).unwrap();
     let t = d.compute(&sp(1, now, Q, [0.0; 6]), 1, now).unwrap();
@@ -78,7 +78,7 @@ fn on_the_setpoint_at_rest_feedback_equals_inverse_dynamics() {
 fn stale_state_gives_flagged_feed_forward() {
     let c = cfg(false);
     let robot = Robot::from_file(&c.robot).unwrap();
-    let mut d = DynamicsCore::new(&robot, &c);
+    let mut d = DynamicsCore::new(&robot, &c, &DynamicsConfig::default());
     let now = 1000 * MS;
     d.accept_state(&state(1, 0, now - 60 * MS, Q), 9, 0)
         .unwrap();
@@ -92,7 +92,7 @@ fn stale_state_gives_flagged_feed_forward() {
 fn lockstep_uses_only_state_k_minus_1() {
     let c = cfg(true);
     let robot = Robot::from_file(&c.robot).unwrap();
-    let mut d = DynamicsCore::new(&robot, &c);
+    let mut d = DynamicsCore::new(&robot, &c, &DynamicsConfig::default());
     d.accept_state(&state(1, 4, 0, Q), 9, 0).unwrap();
     let t = d.compute(&sp(5, 0, Q, [0.0; 6]), 1, 0).unwrap();
     assert_ne!(t.flags & torque_flags::FEEDBACK, 0);
@@ -112,7 +112,7 @@ fn lockstep_feedback_ignores_the_actuators_final_state() {
     let c = cfg(true);
     let robot = Robot::from_file(&c.robot).unwrap();
     let torque = |final_first: bool| {
-        let mut d = DynamicsCore::new(&robot, &c);
+        let mut d = DynamicsCore::new(&robot, &c, &DynamicsConfig::default());
         d.accept_state(&state(1, 4, 0, Q), 9, 0).unwrap();
         let mut last = state(2, 4, 0, [0.0; 6]);
         last.flags = state_flags::FINAL;
@@ -136,7 +136,7 @@ fn lockstep_feedback_ignores_the_actuators_final_state() {
 fn torques_beyond_the_effort_limit_are_clamped_and_flagged() {
     let c = cfg(false);
     let robot = Robot::from_file(&c.robot).unwrap();
-    let mut d = DynamicsCore::new(&robot, &c);
+    let mut d = DynamicsCore::new(&robot, &c, &DynamicsConfig::default());
     let now = 1000 * MS;
     d.accept_state(&state(1, 0, now, Q), 9, 0).unwrap();
     let t = d.compute(&sp(1, now, Q, [500.0; 6]), 1, now).unwrap();
@@ -151,7 +151,7 @@ fn torques_beyond_the_effort_limit_are_clamped_and_flagged() {
 fn bad_setpoints_get_no_torque() {
     let c = cfg(false);
     let robot = Robot::from_file(&c.robot).unwrap();
-    let mut d = DynamicsCore::new(&robot, &c);
+    let mut d = DynamicsCore::new(&robot, &c, &DynamicsConfig::default());
     let now = 1000 * MS;
     let mut nan = sp(1, now, Q, [0.0; 6]);
     nan.qd[3] = f64::NAN;
@@ -187,15 +187,14 @@ fn bad_setpoints_get_no_torque() {
 fn a_state_that_jumped_gives_a_torque_ramp_not_a_step() {
     let c = cfg(false);
     let robot = Robot::from_file(&c.robot).unwrap();
-    let mut d = DynamicsCore::new(&robot, &c);
+    let mut d = DynamicsCore::new(&robot, &c, &DynamicsConfig::default());
+    let dynamics = DynamicsConfig::default();
     let mut free = DynamicsCore::new(
         &robot,
-        &PipelineConfig {
-            dynamics: microrobot_runtime::config::DynamicsConfig {
-                torque_slew_ms: 0.0,
-                ..c.dynamics.clone()
-            },
-            ..c.clone()
+        &c,
+        &DynamicsConfig {
+            torque_slew_ms: 0.0,
+            ..dynamics.clone()
         },
     );
     let now = 1000 * MS;
@@ -207,7 +206,7 @@ fn a_state_that_jumped_gives_a_torque_ramp_not_a_step() {
     let per_tick: Vec<f64> = robot
         .joints()
         .iter()
-        .map(|j| j.limits.effort / (c.dynamics.torque_slew_ms * 1e-3 * c.rate_hz))
+        .map(|j| j.limits.effort / (dynamics.torque_slew_ms * 1e-3 * c.rate_hz))
         .collect();
     free.accept_state(&state(1, 1, now, sagged), 9, 0).unwrap();
     let wanted = free.compute(&sp(2, now, Q, [0.0; 6]), 1, now).unwrap();

@@ -31,6 +31,7 @@
 //! The logic lives in [`PlannerCore`] (no IPC); the service's stage (its ports, clock
 //! and wake-up) in `stage.rs`.
 
+pub mod config;
 pub mod program;
 mod stage;
 pub mod teleop;
@@ -45,7 +46,9 @@ use microrobot_messages::{
 use microrobot_model::ik::{IkOptions, IkTarget};
 use microrobot_model::{ModelData, Robot};
 use microrobot_runtime::BadConfig;
-use microrobot_runtime::config::{PipelineConfig, ms_to_ns};
+use microrobot_runtime::config::{OwnedSection as _, PipelineConfig, ms_to_ns};
+
+pub use config::TeleopConfig;
 use microrobot_runtime::validate::{Refusal, SeqTracker, check_fresh, check_state};
 use microrobot_trajectory::{
     Generator, JointVector, KinematicLimits, MotionRequest, MotionState, Profile, Sample, Status,
@@ -403,7 +406,7 @@ impl PlannerCore {
             last_estop_latency_ns: None,
             max_estop_latency_ns: 0,
             teleop: teleop::TeleopMode::new(robot, cfg, &scaled(robot, cfg.planner.limit_scale)),
-            teleop_at_start: cfg.teleop.enabled,
+            teleop_at_start: TeleopConfig::from_pipeline(cfg).is_ok_and(|t| t.enabled),
             state_stale: false,
         }
     }

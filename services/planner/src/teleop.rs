@@ -7,7 +7,9 @@
 
 use microrobot_messages::{MasterPose, setpoint_flags};
 use microrobot_model::Robot;
-use microrobot_runtime::config::{PipelineConfig, ms_to_ns};
+use microrobot_runtime::config::{OwnedSection as _, PipelineConfig, ms_to_ns};
+
+use crate::config::TeleopConfig;
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::StreamOwner;
 use microrobot_teleop::{Hand, TeleopController, TeleopSettings, flags};
@@ -48,9 +50,8 @@ pub struct TeleopMode {
     pub latency: LatencyHistogram,
 }
 
-/// The controller settings of the pipeline config (SI already).
-pub fn settings(cfg: &PipelineConfig) -> TeleopSettings {
-    let t = &cfg.teleop;
+/// The controller settings of `[teleop]` (SI already).
+pub fn settings(t: &TeleopConfig) -> TeleopSettings {
     TeleopSettings {
         ratio: t.ratio,
         frame: Rotation3::from_euler_angles(t.frame_rpy[0], t.frame_rpy[1], t.frame_rpy[2]),
@@ -81,18 +82,27 @@ fn setpoint_bits(f: u32) -> u32 {
 }
 
 impl TeleopMode {
-    /// Teleop for `robot` with `cfg`'s `[teleop]`, joints within `limits`. A controller
-    /// that cannot be built is kept as its error: entering teleop is then refused.
+    /// Teleop for `robot` with `cfg`'s `[teleop]`, joints within `limits`. A section or
+    /// controller that cannot be built is kept as its error: entering teleop is then
+    /// refused.
     pub fn new(robot: &Robot, cfg: &PipelineConfig, limits: &KinematicLimits) -> Self {
-        let controller = TeleopController::new(
-            robot,
-            settings(cfg),
-            limits,
-            1.0 / cfg.rate_hz,
-            Sample::default(),
-        )
-        .map_err(|e| e.to_string());
-        let timeout_ns = ms_to_ns(cfg.teleop.master_timeout_ms);
+        let teleop = TeleopConfig::from_pipeline(cfg).map_err(|e| e.to_string());
+        let controller = teleop.as_ref().map_err(Clone::clone).and_then(|t| {
+            TeleopController::new(
+                robot,
+                settings(t),
+                limits,
+                1.0 / cfg.rate_hz,
+                Sample::default(),
+            )
+            .map_err(|e| e.to_string())
+        });
+        let master_timeout_ms = teleop
+            .as_ref()
+            .map_or(TeleopConfig::default().master_timeout_ms, |t| {
+                t.master_timeout_ms
+            });
+        let timeout_ns = ms_to_ns(master_timeout_ms);
         Self {
             controller,
             timeout_ns,

@@ -4,14 +4,14 @@
 
 use std::path::PathBuf;
 
-use microrobot_actuator::{ActuatorCore, SimArm, initial_q};
-use microrobot_dynamics::DynamicsCore;
+use microrobot_actuator::{ActuatorConfig, ActuatorCore, SimArm, initial_q};
+use microrobot_dynamics::{DynamicsConfig, DynamicsCore};
 use microrobot_messages::{
     CommandKind, JointSetpoint, JointState, MotionCommand, ProfileKind, TargetSpace, TorqueCommand,
 };
 use microrobot_model::Robot;
 use microrobot_planner::PlannerCore;
-use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::config::{OwnedSection, PipelineConfig};
 
 fn robot_path() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml")
@@ -23,6 +23,15 @@ fn lockstep_config() -> PipelineConfig {
         lockstep: true,
         ..Default::default()
     }
+}
+
+/// `[dynamics] feedback = false` in `cfg`.
+fn feed_forward_only(cfg: &mut PipelineConfig) {
+    DynamicsConfig {
+        feedback: false,
+        ..DynamicsConfig::default()
+    }
+    .store(cfg);
 }
 
 fn move_command(target: [f64; 6]) -> MotionCommand {
@@ -49,9 +58,15 @@ struct Run {
 /// per message) so whole messages can be compared.
 fn run_loop(cfg: &PipelineConfig, target: [f64; 6], steps: usize) -> Run {
     let robot = Robot::from_file(&cfg.robot).unwrap();
-    let sim = SimArm::new(&robot, &cfg.actuator.sim, &initial_q(&robot, cfg));
-    let mut act = ActuatorCore::new(sim, &robot, cfg).unwrap();
-    let mut dynamics = DynamicsCore::new(&robot, cfg);
+    let actuator_cfg = ActuatorConfig::from_pipeline(cfg).unwrap();
+    let sim = SimArm::new(
+        &robot,
+        &actuator_cfg.sim,
+        &initial_q(&robot, &actuator_cfg.sim),
+    );
+    let mut act = ActuatorCore::new(sim, &robot, cfg, &actuator_cfg).unwrap();
+    let dynamics_cfg = DynamicsConfig::from_pipeline(cfg).unwrap();
+    let mut dynamics = DynamicsCore::new(&robot, cfg, &dynamics_cfg);
     let mut planner = PlannerCore::new(&robot, cfg, None);
     let mut now = 1_000_000u64;
     let mut clock = || {
@@ -118,9 +133,11 @@ fn exact_model_with_feedback_tracks_within_1e_5_rad() {
 #[test]
 fn heavier_links_feedback_stays_bounded_and_feed_forward_is_worse() {
     let mut cfg = lockstep_config();
-    cfg.actuator.sim.mass_scale = 1.1;
+    let mut actuator = ActuatorConfig::default();
+    actuator.sim.mass_scale = 1.1;
+    actuator.store(&mut cfg);
     let fb = run_loop(&cfg, TARGET, STEPS);
-    cfg.dynamics.feedback = false;
+    feed_forward_only(&mut cfg);
     let ff = run_loop(&cfg, TARGET, STEPS);
     // The gravity of the extra 10 % is corrected only through Kp: ~1.0e-3 rad measured.
     assert!(
@@ -139,7 +156,7 @@ fn heavier_links_feedback_stays_bounded_and_feed_forward_is_worse() {
 #[test]
 fn feed_forward_alone_drifts_even_with_the_exact_model() {
     let mut cfg = lockstep_config();
-    cfg.dynamics.feedback = false;
+    feed_forward_only(&mut cfg);
     let ff = run_loop(&cfg, TARGET, STEPS);
     // Reported, not hidden: a held torque over each period is not the continuous
     // feed-forward torque, and nothing corrects the drift.

@@ -1,6 +1,9 @@
-//! The pipeline configuration (`config/pipeline.toml`): every key checked, units in
-//! the key names converted once at load, relative paths resolved against the file's
-//! directory. `config/pipeline.README.md` documents every key.
+//! The pipeline configuration (`config/pipeline.toml`): the pipeline-wide keys and the
+//! sections several processes read, every key checked, units in the key names
+//! converted once at load, relative paths resolved against the file's directory. The
+//! sections a single service crate uses ([`OWNED_SECTIONS`]) are handed out raw to their
+//! owners ([`OwnedSection`]); `microrobot-config` reads a whole file through all of them.
+//! `config/pipeline.README.md` documents every key.
 //!
 //! Errors name the file and the full key path (`watchdog.stale_ms`), so a user finds
 //! the typo. Unknown keys, wrong types, non-finite numbers and out-of-range values are
@@ -11,9 +14,6 @@ use std::path::{Path, PathBuf};
 
 use microrobot_keypath::{KeyError, Range, Table as KeyTable};
 use toml::{Table, Value};
-
-mod teleop;
-pub use teleop::TeleopConfig;
 
 /// Why a pipeline config was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -73,22 +73,6 @@ pub enum PlannerClock {
     /// Each measured-state message of the actuator: the drive's bus cycle is the master
     /// clock (as with an EtherCAT distributed clock). Lockstep always ticks this way.
     ActuatorState,
-}
-
-/// Numerical integrator of the simulated arm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Integrator {
-    /// Classic 4th-order Runge-Kutta on (q, qd) with the torque held constant.
-    Rk4,
-    /// Semi-implicit (symplectic) Euler: qd += qdd·h, then q += qd·h.
-    SemiImplicitEuler,
-}
-
-/// Actuator backend kind.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BackendKind {
-    /// The simulated arm (forward dynamics of the robot model).
-    Sim,
 }
 
 /// What the supervisor does when a service dies.
@@ -157,66 +141,6 @@ pub struct PlannerConfig {
     pub clock: PlannerClock,
 }
 
-/// `[dynamics]`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct DynamicsConfig {
-    /// Computed-torque feedback on the measured state (false: feed-forward RNEA only).
-    pub feedback: bool,
-    /// Predict the measured state one period ahead before the feedback (it is one period
-    /// older than the setpoint).
-    pub delay_compensation: bool,
-    /// Position gain Kp (1/s²).
-    pub kp_per_s2: f64,
-    /// Velocity gain Kd (1/s).
-    pub kd_per_s: f64,
-    /// Minimum time for a commanded torque to change by the joint's full effort limit
-    /// (ms); 0 = no slew limit.
-    pub torque_slew_ms: f64,
-}
-
-/// `[actuator.sim]`: the simulated arm.
-#[derive(Debug, Clone, PartialEq)]
-pub struct SimConfig {
-    /// Link masses and inertias multiplied by this (1.1 = links 10 % heavier than the model).
-    pub mass_scale: f64,
-    /// Extra viscous friction on every joint, unknown to the dynamics (N·m·s/rad).
-    pub viscous_friction_nms: f64,
-    /// Extra Coulomb friction on every joint, unknown to the dynamics (N·m).
-    pub coulomb_friction_nm: f64,
-    /// Standard deviation of Gaussian noise on measured positions (rad).
-    pub sensor_noise_rad: f64,
-    /// Standard deviation of Gaussian noise on measured velocities (rad/s).
-    pub sensor_noise_rad_s: f64,
-    /// Integrator.
-    pub integrator: Integrator,
-    /// Integrator substeps per plant step.
-    pub substeps: u32,
-    /// Seed of the noise generator (same seed, same noise).
-    pub seed: u64,
-    /// Initial joint positions (deg, or mm for prismatic joints); `None`: all zero
-    /// (clamped into the joint limits). Converted to SI by the simulator.
-    pub initial_q_deg: Option<Vec<f64>>,
-}
-
-/// `[actuator]`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ActuatorConfig {
-    /// Backend kind.
-    pub backend: BackendKind,
-    /// External driver process run by the supervisor in place of the actuator service
-    /// (program and arguments); `None`: the built-in actuator service.
-    pub command: Option<Vec<String>>,
-    /// Safe-state hold gain (1/s²).
-    pub hold_kp_per_s2: f64,
-    /// Safe-state hold / damping gain (1/s).
-    pub hold_kd_per_s: f64,
-    /// Minimum time for the applied torque to change by the joint's full effort limit
-    /// (ms), a drive's torque slope; 0 = none.
-    pub torque_slope_ms: f64,
-    /// The simulated arm.
-    pub sim: SimConfig,
-}
-
 /// `[realtime]`: per-process real-time settings, each falling back with one warning.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RealtimeConfig {
@@ -253,7 +177,64 @@ pub struct SupervisorConfig {
     pub hung_ms: f64,
 }
 
-/// The whole pipeline configuration, fully validated.
+/// The sections of the file that a service crate owns: their structs, defaults and
+/// readers live with the code that uses them (`[dynamics]` in `microrobot-dynamics`,
+/// `[actuator]` in `microrobot-actuator`, `[teleop]` in `microrobot-planner`). The
+/// runtime checks only that each is a table and keeps it raw in
+/// [`PipelineConfig::sections`]; `microrobot-config` reads the whole file through every
+/// owner. The other sections stay here: `[watchdog]`, `[planner]` (its `clock` sets the
+/// actuator's phase too) and `[realtime]` are read by several services, and
+/// `[supervisor]`, read by `microrobot run`, is checked by every service at start,
+/// which links no CLI code.
+pub const OWNED_SECTIONS: [&str; 3] = ["dynamics", "actuator", "teleop"];
+
+/// A section of the file owned by a service crate ([`OWNED_SECTIONS`]): its struct,
+/// defaults and reader live with the code that uses it.
+pub trait OwnedSection: Sized {
+    /// The section's name in the file (`dynamics`).
+    const NAME: &'static str;
+
+    /// Reads the section of `cfg` ([`PipelineConfig::section`]): every key checked
+    /// (unknown ones refused), absent ones defaulted, units converted. Errors name the
+    /// file and the key.
+    fn from_pipeline(cfg: &PipelineConfig) -> Result<Self, ConfigError>;
+
+    /// The section with every key, in the file's units (what [`OwnedSection::store`]
+    /// stores, so that the effective config is complete).
+    fn to_table(&self) -> Table;
+
+    /// Stores this as the section of `cfg`, every key: a command-line override, or the
+    /// effective values after a check.
+    fn store(&self, cfg: &mut PipelineConfig) {
+        cfg.set_section(Self::NAME, self.to_table());
+    }
+
+    /// Reads the section of `cfg` and stores it back with every key.
+    fn check(cfg: &mut PipelineConfig) -> Result<Self, ConfigError> {
+        let section = Self::from_pipeline(cfg)?;
+        section.store(cfg);
+        Ok(section)
+    }
+}
+
+/// The owned sections of a config ([`OWNED_SECTIONS`]) as raw TOML tables, with the
+/// name of the file they came from so that their owners' errors name it. Equal when the
+/// tables are: the file name is where a config came from, not part of it.
+#[derive(Debug, Clone, Default)]
+pub struct Sections {
+    file: String,
+    tables: Table,
+}
+
+impl PartialEq for Sections {
+    fn eq(&self, other: &Self) -> bool {
+        self.tables == other.tables
+    }
+}
+
+/// The whole pipeline configuration: the runtime's keys validated, the owned sections
+/// raw until their owners read them (`microrobot_config::load` reads a file through
+/// every owner and stores each section back in full).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PipelineConfig {
     /// Instance name: the service-name prefix (`[A-Za-z0-9_-]`, 1..=64 chars).
@@ -272,11 +253,11 @@ pub struct PipelineConfig {
     pub status_period_ms: f64,
     pub watchdog: WatchdogConfig,
     pub planner: PlannerConfig,
-    pub dynamics: DynamicsConfig,
-    pub actuator: ActuatorConfig,
     pub realtime: RealtimeConfig,
     pub supervisor: SupervisorConfig,
-    pub teleop: TeleopConfig,
+    /// The owned sections ([`OWNED_SECTIONS`]), read by their owners
+    /// ([`PipelineConfig::section`]).
+    pub sections: Sections,
 }
 
 impl Default for PipelineConfig {
@@ -304,31 +285,6 @@ impl Default for PipelineConfig {
                 command_max_age_ms: 1000.0,
                 clock: PlannerClock::Timer,
             },
-            dynamics: DynamicsConfig {
-                feedback: true,
-                delay_compensation: true,
-                kp_per_s2: 2500.0,
-                kd_per_s: 100.0,
-                torque_slew_ms: 20.0,
-            },
-            actuator: ActuatorConfig {
-                backend: BackendKind::Sim,
-                command: None,
-                hold_kp_per_s2: 400.0,
-                hold_kd_per_s: 40.0,
-                torque_slope_ms: 10.0,
-                sim: SimConfig {
-                    mass_scale: 1.0,
-                    viscous_friction_nms: 0.0,
-                    coulomb_friction_nm: 0.0,
-                    sensor_noise_rad: 0.0,
-                    sensor_noise_rad_s: 0.0,
-                    integrator: Integrator::Rk4,
-                    substeps: 1,
-                    seed: 1,
-                    initial_q_deg: None,
-                },
-            },
             realtime: RealtimeConfig {
                 cpu_affinity: vec![1],
                 pm_qos: true,
@@ -345,15 +301,17 @@ impl Default for PipelineConfig {
                 max_restarts: 3,
                 hung_ms: 500.0,
             },
-            teleop: TeleopConfig::default(),
+            sections: Sections::default(),
         }
     }
 }
 
 impl PipelineConfig {
-    /// Reads and validates a pipeline config file; relative paths inside are resolved
-    /// against the file's directory. Errors name the file and the key.
-    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+    /// Reads a pipeline config file and validates the runtime's keys, keeping the owned
+    /// sections raw ([`OWNED_SECTIONS`]; `microrobot_config::load` reads them through
+    /// their owners too); relative paths inside are resolved against the file's
+    /// directory. Errors name the file and the key.
+    pub fn load_runtime_keys(path: &Path) -> Result<Self, ConfigError> {
         let origin = path.display().to_string();
         let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
             file: origin.clone(),
@@ -369,12 +327,17 @@ impl PipelineConfig {
         } else {
             base
         };
-        Self::from_toml_str(&text, &origin, &base)
+        Self::runtime_keys_from_toml_str(&text, &origin, &base)
     }
 
-    /// Parses and validates config text; `origin` names it in errors, `base_dir` resolves
-    /// relative paths (made absolute when `base_dir` exists).
-    pub fn from_toml_str(text: &str, origin: &str, base_dir: &Path) -> Result<Self, ConfigError> {
+    /// Parses config text and validates the runtime's keys, keeping the owned sections
+    /// raw (as [`PipelineConfig::load_runtime_keys`]); `origin` names it in errors,
+    /// `base_dir` resolves relative paths (made absolute when `base_dir` exists).
+    pub fn runtime_keys_from_toml_str(
+        text: &str,
+        origin: &str,
+        base_dir: &Path,
+    ) -> Result<Self, ConfigError> {
         let table: Table = text.parse().map_err(|e: toml::de::Error| ConfigError {
             file: origin.to_string(),
             key: None,
@@ -383,6 +346,20 @@ impl PipelineConfig {
         let r = Reader { file: origin };
         let base = std::fs::canonicalize(base_dir).unwrap_or_else(|_| base_dir.to_path_buf());
         r.pipeline(&table, &base)
+    }
+
+    /// The owned section `name` ([`OWNED_SECTIONS`]) as a key-path table of the file it
+    /// came from, for its owner to read (absent: an empty table, every key absent).
+    pub fn section(&self, name: &str) -> Result<KeyTable<'_>, KeyError> {
+        KeyTable::root(&self.sections.file, &self.sections.tables).opt_table(name)
+    }
+
+    /// Stores `table` as the owned section `name`: its owner's effective values, so that
+    /// [`PipelineConfig::to_toml_string`] writes every key of it.
+    pub fn set_section(&mut self, name: &str, table: Table) {
+        self.sections
+            .tables
+            .insert(name.to_string(), Value::Table(table));
     }
 
     /// The control period in ns (`1e9 / rate_hz`, rounded).
@@ -408,7 +385,8 @@ impl PipelineConfig {
     }
 
     /// Serialises the (validated) config back to TOML with absolute paths, so the text
-    /// is self-contained: `from_toml_str(to_toml_string())` gives the same config.
+    /// is self-contained: reading it back (`microrobot_config::from_toml_str`) gives the
+    /// same config.
     pub fn to_toml_string(&self) -> String {
         let mut s = String::new();
         let f = |v: f64| fmt_f64(v);
@@ -444,44 +422,6 @@ impl PipelineConfig {
                 PlannerClock::ActuatorState => "actuator_state",
             })
         );
-        let d = &self.dynamics;
-        let _ = writeln!(s, "\n[dynamics]");
-        let _ = writeln!(s, "feedback = {}", d.feedback);
-        let _ = writeln!(s, "delay_compensation = {}", d.delay_compensation);
-        let _ = writeln!(s, "kp_per_s2 = {}", f(d.kp_per_s2));
-        let _ = writeln!(s, "kd_per_s = {}", f(d.kd_per_s));
-        let _ = writeln!(s, "torque_slew_ms = {}", f(d.torque_slew_ms));
-        let a = &self.actuator;
-        let _ = writeln!(s, "\n[actuator]");
-        let _ = writeln!(s, "backend = \"sim\"");
-        if let Some(cmd) = &a.command {
-            let items: Vec<String> = cmd.iter().map(|c| quote(c)).collect();
-            let _ = writeln!(s, "command = [{}]", items.join(", "));
-        }
-        let _ = writeln!(s, "hold_kp_per_s2 = {}", f(a.hold_kp_per_s2));
-        let _ = writeln!(s, "hold_kd_per_s = {}", f(a.hold_kd_per_s));
-        let _ = writeln!(s, "torque_slope_ms = {}", f(a.torque_slope_ms));
-        let m = &a.sim;
-        let _ = writeln!(s, "\n[actuator.sim]");
-        let _ = writeln!(s, "mass_scale = {}", f(m.mass_scale));
-        let _ = writeln!(s, "viscous_friction_nms = {}", f(m.viscous_friction_nms));
-        let _ = writeln!(s, "coulomb_friction_nm = {}", f(m.coulomb_friction_nm));
-        let _ = writeln!(s, "sensor_noise_rad = {}", f(m.sensor_noise_rad));
-        let _ = writeln!(s, "sensor_noise_rad_s = {}", f(m.sensor_noise_rad_s));
-        let _ = writeln!(
-            s,
-            "integrator = {}",
-            quote(match m.integrator {
-                Integrator::Rk4 => "rk4",
-                Integrator::SemiImplicitEuler => "semi_implicit_euler",
-            })
-        );
-        let _ = writeln!(s, "substeps = {}", m.substeps);
-        let _ = writeln!(s, "seed = {}", m.seed);
-        if let Some(q) = &m.initial_q_deg {
-            let items: Vec<String> = q.iter().map(|v| f(*v)).collect();
-            let _ = writeln!(s, "initial_q_deg = [{}]", items.join(", "));
-        }
         let r = &self.realtime;
         let _ = writeln!(s, "\n[realtime]");
         let cpus: Vec<String> = r.cpu_affinity.iter().map(|c| c.to_string()).collect();
@@ -513,7 +453,9 @@ impl PipelineConfig {
         );
         let _ = writeln!(s, "max_restarts = {}", v.max_restarts);
         let _ = writeln!(s, "hung_ms = {}", f(v.hung_ms));
-        teleop::write_toml(&self.teleop, &mut s);
+        if !self.sections.tables.is_empty() {
+            let _ = write!(s, "\n{}", self.sections.tables);
+        }
         s
     }
 }
@@ -716,161 +658,15 @@ impl Reader<'_> {
             )?,
         };
 
-        let t = top.section(
-            "dynamics",
-            &[
-                "feedback",
-                "delay_compensation",
-                "kp_per_s2",
-                "kd_per_s",
-                "torque_slew_ms",
-            ],
-        )?;
-        let dd = &d.dynamics;
-        let dynamics = DynamicsConfig {
-            feedback: t.bool_or("feedback", dd.feedback)?,
-            delay_compensation: t.bool_or("delay_compensation", dd.delay_compensation)?,
-            kp_per_s2: t.number_in("kp_per_s2", dd.kp_per_s2, Range::closed(0.0, 1.0e7))?,
-            kd_per_s: t.number_in("kd_per_s", dd.kd_per_s, Range::closed(0.0, 1.0e5))?,
-            torque_slew_ms: t.number_in(
-                "torque_slew_ms",
-                dd.torque_slew_ms,
-                Range::closed(0.0, 10_000.0),
-            )?,
-        };
-        // Discrete stability of the computed-torque loop at this rate (one-period delay).
-        if dynamics.kd_per_s / rate_hz > 1.0 || dynamics.kp_per_s2 / (rate_hz * rate_hz) > 0.5 {
-            return Err(self.err(
-                "dynamics.kp_per_s2",
-                format!(
-                    "gains Kp {} /s², Kd {} /s are too high for {rate_hz} Hz (need Kd/rate <= 1, Kp/rate² <= 0.5)",
-                    dynamics.kp_per_s2, dynamics.kd_per_s
-                ),
-            ));
+        let mut tables = Table::new();
+        for name in OWNED_SECTIONS {
+            if let Some(t) = top.opt_table(name)?.raw() {
+                tables.insert(name.to_string(), Value::Table(t.clone()));
+            }
         }
-
-        let t = top.section(
-            "actuator",
-            &[
-                "backend",
-                "command",
-                "hold_kp_per_s2",
-                "hold_kd_per_s",
-                "torque_slope_ms",
-                "sim",
-            ],
-        )?;
-        let da = &d.actuator;
-        let backend = t.choice("backend", da.backend, &[("sim", BackendKind::Sim)])?;
-        let command = match t.get("command") {
-            None => None,
-            Some(Value::Array(items)) => {
-                let mut out = Vec::with_capacity(items.len());
-                for (i, it) in items.iter().enumerate() {
-                    match it {
-                        Value::String(s) if !s.is_empty() => out.push(s.clone()),
-                        _ => {
-                            return Err(self.err(
-                                &format!("actuator.command[{i}]"),
-                                "expected a non-empty string",
-                            ));
-                        }
-                    }
-                }
-                if out.is_empty() {
-                    return Err(self.err("actuator.command", "must name a program"));
-                }
-                Some(out)
-            }
-            Some(_) => return Err(self.err("actuator.command", "expected an array of strings")),
-        };
-        let hold_kp_per_s2 = t.number_in(
-            "hold_kp_per_s2",
-            da.hold_kp_per_s2,
-            Range::closed(0.0, 1.0e7),
-        )?;
-        let hold_kd_per_s = t.number_in(
-            "hold_kd_per_s",
-            da.hold_kd_per_s,
-            Range::left_open(0.0, 1.0e5),
-        )?;
-        let torque_slope_ms = t.number_in(
-            "torque_slope_ms",
-            da.torque_slope_ms,
-            Range::closed(0.0, 10_000.0),
-        )?;
-        let s = t.section(
-            "sim",
-            &[
-                "mass_scale",
-                "viscous_friction_nms",
-                "coulomb_friction_nm",
-                "sensor_noise_rad",
-                "sensor_noise_rad_s",
-                "integrator",
-                "substeps",
-                "seed",
-                "initial_q_deg",
-            ],
-        )?;
-        let ds = &da.sim;
-        let initial_q_deg = match s.get("initial_q_deg") {
-            None => None,
-            Some(Value::Array(items)) => {
-                if items.is_empty() || items.len() > 8 {
-                    return Err(self.err("actuator.sim.initial_q_deg", "expected 1 to 8 numbers"));
-                }
-                let mut out = Vec::with_capacity(items.len());
-                for (i, it) in items.iter().enumerate() {
-                    out.push(s.number_of(it, format!("actuator.sim.initial_q_deg[{i}]"))?);
-                }
-                Some(out)
-            }
-            Some(_) => {
-                return Err(self.err("actuator.sim.initial_q_deg", "expected an array of numbers"));
-            }
-        };
-        let sim = SimConfig {
-            mass_scale: s.number_in("mass_scale", ds.mass_scale, Range::closed(0.1, 10.0))?,
-            viscous_friction_nms: s.number_in(
-                "viscous_friction_nms",
-                ds.viscous_friction_nms,
-                Range::closed(0.0, 1.0e4),
-            )?,
-            coulomb_friction_nm: s.number_in(
-                "coulomb_friction_nm",
-                ds.coulomb_friction_nm,
-                Range::closed(0.0, 1.0e4),
-            )?,
-            sensor_noise_rad: s.number_in(
-                "sensor_noise_rad",
-                ds.sensor_noise_rad,
-                Range::closed(0.0, 1.0),
-            )?,
-            sensor_noise_rad_s: s.number_in(
-                "sensor_noise_rad_s",
-                ds.sensor_noise_rad_s,
-                Range::closed(0.0, 10.0),
-            )?,
-            integrator: s.choice(
-                "integrator",
-                ds.integrator,
-                &[
-                    ("rk4", Integrator::Rk4),
-                    ("semi_implicit_euler", Integrator::SemiImplicitEuler),
-                ],
-            )?,
-            substeps: s.integer_in("substeps", ds.substeps as u64, 1, 1000)? as u32,
-            seed: s.integer_in("seed", ds.seed, 0, i64::MAX as u64)?,
-            initial_q_deg,
-        };
-        let actuator = ActuatorConfig {
-            backend,
-            command,
-            hold_kp_per_s2,
-            hold_kd_per_s,
-            torque_slope_ms,
-            sim,
+        let sections = Sections {
+            file: self.file.to_string(),
+            tables,
         };
 
         let t = top.section(
@@ -987,154 +783,9 @@ impl Reader<'_> {
             status_period_ms,
             watchdog,
             planner,
-            dynamics,
-            actuator,
             realtime,
             supervisor,
-            teleop: self.teleop(&top, rate_hz)?,
+            sections,
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn dir_with_robot() -> (PathBuf, PathBuf) {
-        let dir =
-            std::env::temp_dir().join(format!("mr-cfg-{}-{}", std::process::id(), rand_suffix()));
-        std::fs::create_dir_all(dir.join("robots")).unwrap();
-        let robot = dir.join("robots/seed-arm.toml");
-        std::fs::write(&robot, "# placeholder\n").unwrap();
-        (dir, robot)
-    }
-
-    fn rand_suffix() -> u64 {
-        use std::sync::atomic::{AtomicU64, Ordering};
-        static N: AtomicU64 = AtomicU64::new(0);
-        N.fetch_add(1, Ordering::Relaxed)
-    }
-
-    fn parse(text: &str) -> Result<PipelineConfig, ConfigError> {
-        let (dir, _) = dir_with_robot();
-        PipelineConfig::from_toml_str(text, "pipeline.toml", &dir)
-    }
-
-    fn err_key(text: &str) -> (Option<String>, String) {
-        let e = parse(text).unwrap_err();
-        assert_eq!(e.file, "pipeline.toml");
-        let msg = e.to_string();
-        assert!(msg.starts_with("pipeline.toml: "), "{msg}");
-        (e.key, msg)
-    }
-
-    #[test]
-    fn empty_file_gives_defaults_with_resolved_robot() {
-        let c = parse("").unwrap();
-        assert_eq!(c.rate_hz, 1000.0);
-        assert!(c.robot.is_absolute());
-        assert!(c.robot.ends_with("robots/seed-arm.toml"));
-        assert_eq!(c.watchdog.stale_ms, 50.0);
-        assert_eq!(c.realtime.cpu_affinity, vec![1]);
-    }
-
-    #[test]
-    fn unknown_key_is_refused_with_its_path() {
-        assert_eq!(err_key("rate = 5").0.as_deref(), Some("rate"));
-        assert_eq!(
-            err_key("[watchdog]\nstale = 5").0.as_deref(),
-            Some("watchdog.stale")
-        );
-        assert_eq!(
-            err_key("[actuator.sim]\nmass = 1.0").0.as_deref(),
-            Some("actuator.sim.mass")
-        );
-        assert_eq!(err_key("[bogus]").0.as_deref(), Some("bogus"));
-    }
-
-    #[test]
-    fn wrong_type_non_finite_and_out_of_range_name_the_key() {
-        assert_eq!(err_key("rate_hz = \"fast\"").0.as_deref(), Some("rate_hz"));
-        assert_eq!(err_key("rate_hz = nan").0.as_deref(), Some("rate_hz"));
-        assert_eq!(err_key("rate_hz = inf").0.as_deref(), Some("rate_hz"));
-        assert_eq!(err_key("rate_hz = 0").0.as_deref(), Some("rate_hz"));
-        assert_eq!(
-            err_key("[watchdog]\nstale_ms = -1").0.as_deref(),
-            Some("watchdog.stale_ms")
-        );
-        assert_eq!(
-            err_key("[watchdog]\nfault_ms = 10").0.as_deref(),
-            Some("watchdog.fault_ms")
-        );
-        assert_eq!(
-            err_key("[watchdog]\nsafe_state = \"run\"").0.as_deref(),
-            Some("watchdog.safe_state")
-        );
-        assert_eq!(
-            err_key("[dynamics]\nfeedback = 1").0.as_deref(),
-            Some("dynamics.feedback")
-        );
-        assert_eq!(
-            err_key("[realtime]\nsched_fifo_priority = 100")
-                .0
-                .as_deref(),
-            Some("realtime.sched_fifo_priority")
-        );
-        assert_eq!(
-            err_key("[actuator.sim]\nsubsteps = 0").0.as_deref(),
-            Some("actuator.sim.substeps")
-        );
-        assert_eq!(err_key("instance = \"a/b\"").0.as_deref(), Some("instance"));
-        assert_eq!(
-            err_key("program = \"nope.toml\"").0.as_deref(),
-            Some("program")
-        );
-        assert_eq!(
-            err_key("[planner]\nlimit_scale = 1.5").0.as_deref(),
-            Some("planner.limit_scale")
-        );
-        // Denormal and tiny scales: refused like a command's, named, with the range.
-        for (text, key) in [
-            ("[planner]\nlimit_scale = 1e-300", "planner.limit_scale"),
-            ("[planner]\nlimit_scale = 0.0009", "planner.limit_scale"),
-            (
-                "[planner]\nestop_limit_scale = 1e-300",
-                "planner.estop_limit_scale",
-            ),
-        ] {
-            let (k, msg) = err_key(text);
-            assert_eq!(k.as_deref(), Some(key), "{text}");
-            assert!(msg.contains("[0.001, 1]"), "{text}: {msg}");
-        }
-        assert!(parse("[planner]\nlimit_scale = 0.001").is_ok());
-    }
-
-    #[test]
-    fn syntax_error_names_the_file() {
-        let e = parse("rate_hz = = 3").unwrap_err();
-        assert_eq!(e.key, None);
-        assert!(e.to_string().contains("pipeline.toml"));
-    }
-
-    #[test]
-    fn too_high_gains_for_the_rate_are_refused() {
-        let (k, _) =
-            err_key("rate_hz = 100\n[watchdog]\nstale_ms = 50\n[dynamics]\nkp_per_s2 = 10000");
-        assert_eq!(k.as_deref(), Some("dynamics.kp_per_s2"));
-    }
-
-    #[test]
-    fn round_trip_through_toml_is_exact() {
-        let c = parse(
-            "instance = \"lab-1\"\nrate_hz = 4000.0\nduration_s = 2.5\nlockstep = true\n\
-             [watchdog]\nsafe_state = \"damp\"\nauto_resume = true\n\
-             [actuator]\ncommand = [\"drv\", \"--x\"]\n[actuator.sim]\nmass_scale = 1.1\ninitial_q_deg = [10, 20.5]\nintegrator = \"semi_implicit_euler\"\n\
-             [realtime]\ncpu_affinity = []\noverrun = \"catch_up\"\n[supervisor]\non_failure = \"restart\"",
-        )
-        .unwrap();
-        let text = c.to_toml_string();
-        let back =
-            PipelineConfig::from_toml_str(&text, "re.toml", Path::new("/nonexistent")).unwrap();
-        assert_eq!(back, c);
     }
 }

@@ -66,6 +66,10 @@ pub mod exit_code {
 /// A service's main loop: runs until the program is done or `shutdown` is requested.
 pub type ServiceFn = fn(&PipelineConfig, &Shutdown) -> anyhow::Result<()>;
 
+/// Reads and validates a whole pipeline config file (`microrobot_config::load`): the
+/// runtime cannot read the sections its services own, so a service's `main` passes it in.
+pub type LoadFn = fn(&Path) -> Result<PipelineConfig, ConfigError>;
+
 /// A config (or robot/program file) error, so [`service_main`] exits with BAD_CONFIG.
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]
@@ -91,7 +95,14 @@ pub fn enter_cycle(cfg: &PipelineConfig) {
 /// which the supervisor compares with its own before it starts anything, so a binary
 /// left over from another build never runs in a pipeline. Anything else is a usage
 /// error ([`exit_code::USAGE`]).
-pub fn service_binary_main(role: ServiceRole, build_id: &str, service: ServiceFn) -> ExitCode {
+/// `load` reads the whole config file (`microrobot_config::load`: the runtime's keys and
+/// every owned section through its owner).
+pub fn service_binary_main(
+    role: ServiceRole,
+    build_id: &str,
+    load: LoadFn,
+    service: ServiceFn,
+) -> ExitCode {
     let args: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
     let program = format!("microrobot-{}", role.name());
     match args.as_slice() {
@@ -99,7 +110,7 @@ pub fn service_binary_main(role: ServiceRole, build_id: &str, service: ServiceFn
             println!("{build_id}");
             ExitCode::SUCCESS
         }
-        [flag, path] if flag == "--config" => service_main(role, Path::new(path), service),
+        [flag, path] if flag == "--config" => service_main(role, Path::new(path), load, service),
         _ => {
             eprintln!("usage: {program} --config FILE\n       {program} --build-id");
             ExitCode::from(exit_code::USAGE)
@@ -109,11 +120,16 @@ pub fn service_binary_main(role: ServiceRole, build_id: &str, service: ServiceFn
 
 /// Installs tracing (`RUST_LOG`, default `info`, to stderr), makes `ctrlc` the one owner
 /// of SIGINT/SIGTERM, asks for SIGTERM if the parent (the supervisor) dies, loads the
-/// config, applies the real-time settings that precede set-up (PM QoS, timer slack,
+/// config with `load`, applies the real-time settings that precede set-up (PM QoS, timer slack,
 /// mlockall; each falling back with one warning), leaves CPU affinity and SCHED_FIFO to
 /// [`enter_cycle`], and runs `service`. Returns the process exit code ([`exit_code`]).
-pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -> ExitCode {
-    service_main_with(role, config_path, |_| Ok(()), service)
+pub fn service_main(
+    role: ServiceRole,
+    config_path: &Path,
+    load: LoadFn,
+    service: ServiceFn,
+) -> ExitCode {
+    service_main_with(role, config_path, load, |_| Ok(()), service)
 }
 
 /// [`service_main`] with a closure as the service, and `adjust` applied to the loaded
@@ -121,6 +137,7 @@ pub fn service_main(role: ServiceRole, config_path: &Path, service: ServiceFn) -
 pub fn service_main_with(
     role: ServiceRole,
     config_path: &Path,
+    load: LoadFn,
     adjust: impl FnOnce(&mut PipelineConfig) -> Result<(), String>,
     service: impl FnOnce(&PipelineConfig, &Shutdown) -> anyhow::Result<()>,
 ) -> ExitCode {
@@ -145,7 +162,7 @@ pub fn service_main_with(
     // SAFETY: plain prctl.
     unsafe { libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM, 0, 0, 0) };
 
-    let cfg = match PipelineConfig::load(config_path) {
+    let cfg = match load(config_path) {
         Ok(mut c) => match adjust(&mut c) {
             Ok(()) => c,
             Err(e) => {

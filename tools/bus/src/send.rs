@@ -16,7 +16,6 @@ use microrobot_messages::{
     open_publish_subscribe, service_name,
 };
 use microrobot_model::{JointKind, Robot};
-use microrobot_runtime::PipelineConfig;
 
 use microrobot_supervisor::monitor::StatusMonitor;
 
@@ -115,7 +114,7 @@ fn robot_of(config: &std::path::Path) -> anyhow::Result<Option<Robot>> {
     if !config.exists() {
         return Ok(None);
     }
-    let cfg = PipelineConfig::load(config).map_err(anyhow::Error::new)?;
+    let cfg = microrobot_config::load(config).map_err(anyhow::Error::new)?;
     let robot = Robot::from_file(&cfg.robot)
         .map_err(|e| anyhow::anyhow!("{}: {e}", cfg.robot.display()))?;
     Ok(Some(robot))

@@ -23,7 +23,8 @@ use microrobot_messages::{
     JointSetpoint, JointState, MasterPose, ServiceKind, open_publish_subscribe, setpoint_flags,
 };
 use microrobot_model::{JointVector, ModelData, Robot, forward_kinematics};
-use microrobot_runtime::config::PipelineConfig;
+use microrobot_planner::TeleopConfig;
+use microrobot_runtime::config::{OwnedSection as _, PipelineConfig};
 use microrobot_teleop::TremorFilter;
 use nalgebra::{Rotation3, SMatrix, SVector, Vector3};
 use serde::Serialize;
@@ -297,9 +298,10 @@ pub fn analyse(
         flag_counts: count_flags(setpoints),
         ..Default::default()
     };
+    let teleop = TeleopConfig::from_pipeline(cfg)?;
     let filter = TremorFilter::butterworth(
-        cfg.teleop.filter_order as usize,
-        cfg.teleop.filter_cutoff_hz,
+        teleop.filter_order as usize,
+        teleop.filter_cutoff_hz,
         cfg.rate_hz,
     )
     .map_err(|e| anyhow::anyhow!("[teleop] filter: {e}"))?;
@@ -367,7 +369,7 @@ pub fn analyse(
     if stretch.len() < 2 {
         bail!("no engaged stretch of valid master samples was captured");
     }
-    let t = &cfg.teleop;
+    let t = &teleop;
     let frame = Rotation3::from_euler_angles(t.frame_rpy[0], t.frame_rpy[1], t.frame_rpy[2]);
     let h0 = Vector3::from(stretch[0].position);
     let (start_ns, end_ns) = (stretch[0].stamp_ns, stretch[stretch.len() - 1].stamp_ns);
@@ -474,7 +476,7 @@ pub fn main(args: TeleopReportArgs) -> anyhow::Result<()> {
         "--settle {}: must be >= 0 s",
         args.settle
     );
-    let cfg = PipelineConfig::load(&args.config).map_err(anyhow::Error::new)?;
+    let cfg = microrobot_config::load(&args.config).map_err(anyhow::Error::new)?;
     let robot = Robot::from_file(&cfg.robot)
         .map_err(|e| anyhow::anyhow!("{}: {e}", cfg.robot.display()))?;
     set_log_level_from_env_or(LogLevel::Error);

@@ -21,7 +21,6 @@ use microrobot_messages::{
     TorqueCommand, open_publish_subscribe,
 };
 use microrobot_model::{JointKind, JointVector, ModelData, Robot};
-use microrobot_runtime::PipelineConfig;
 use serde::Serialize;
 
 use microrobot_supervisor::instance;
@@ -276,7 +275,7 @@ impl ArmTap {
             .map_err(|e| anyhow::anyhow!("torque subscriber: {e:?}"))?;
         let robot = instance::run_file(instance, "pipeline.resolved.toml")
             .ok()
-            .and_then(|resolved| PipelineConfig::load(&resolved).ok())
+            .and_then(|resolved| microrobot_config::load(&resolved).ok())
             .and_then(|cfg| Robot::from_file(&cfg.robot).ok())
             .map(|r| {
                 let data = ModelData::new(&r);

@@ -22,9 +22,10 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
+use microrobot_actuator::ActuatorConfig;
 use microrobot_messages::{LifecycleState, ServiceRole, monotonic_ns};
 use microrobot_model::Robot;
-use microrobot_runtime::config::{FailurePolicy, RealtimeConfig};
+use microrobot_runtime::config::{FailurePolicy, OwnedSection as _, RealtimeConfig};
 use microrobot_runtime::exit_code;
 use microrobot_runtime::timer::{FloorReport, floor_probe_windows};
 
@@ -232,12 +233,15 @@ fn soak(args: &SoakArgs) -> Result<u8, run::Failure> {
         ..base
     };
     let robot = Robot::from_file(&cfg.robot).map_err(|e| bad(anyhow::anyhow!("robot: {e}")))?;
+    let sim = ActuatorConfig::from_pipeline(&cfg)
+        .map_err(|e| bad(anyhow::Error::new(e)))?
+        .sim;
     let bounds = Bounds::new(
         &robot,
         cfg.rate_hz,
         args.jump_tolerance,
-        cfg.actuator.sim.sensor_noise_rad,
-        cfg.actuator.sim.sensor_noise_rad_s,
+        sim.sensor_noise_rad,
+        sim.sensor_noise_rad_s,
     );
     let mut realtime = cfg.service_realtime();
     // The probe shares the pipeline's policy, affinity, PM QoS and slack; locking the

@@ -108,7 +108,7 @@ pub struct ChainReport {
 
 /// Runs the probe (parent) or one link (child).
 pub fn main(args: ProbeChainArgs) -> anyhow::Result<()> {
-    let mut cfg = PipelineConfig::load(&args.config)
+    let mut cfg = microrobot_config::load(&args.config)
         .with_context(|| format!("config {}", args.config.display()))?;
     if let Some(r) = args.rate_hz {
         if !(r.is_finite() && (1.0..=20_000.0).contains(&r)) {

@@ -13,8 +13,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use microrobot_actuator::ActuatorConfig;
 use microrobot_model::{JointKind, Robot};
 use microrobot_planner::program::ProgramRunner;
+use microrobot_runtime::config::OwnedSection as _;
 use microrobot_runtime::{PipelineConfig, exit_code};
 use microrobot_trajectory::MotionState;
 use microrobot_trajectory::program::Target;
@@ -191,7 +193,7 @@ pub fn check_pipeline(cfg: &PipelineConfig) -> Findings {
             .push("program: none (the arm holds and takes `microrobot send` commands)".into());
         return f;
     };
-    if cfg.teleop.enabled {
+    if microrobot_planner::TeleopConfig::from_pipeline(cfg).is_ok_and(|t| t.enabled) {
         f.errors.push(format!(
             "program {} is set, but teleop.enabled = true: the planner would start in teleop mode and never run it (run with --no-program, or set teleop.enabled = false)",
             path.display()
@@ -237,7 +239,7 @@ pub fn check_pipeline(cfg: &PipelineConfig) -> Findings {
 }
 
 fn start_origin(cfg: &PipelineConfig) -> &'static str {
-    if cfg.actuator.command.is_some() {
+    if ActuatorConfig::from_pipeline(cfg).is_ok_and(|a| a.command.is_some()) {
         "an external driver reports the real start at run time; checked from actuator.sim.initial_q_deg"
     } else {
         "actuator.sim.initial_q_deg"
@@ -251,7 +253,9 @@ fn start_position(
     cfg: &PipelineConfig,
     f: &mut Findings,
 ) -> microrobot_model::JointVector {
-    let mut q = microrobot_actuator::initial_q(robot, cfg);
+    // Validated at load: the defaults stand in only for a config built in code.
+    let sim = ActuatorConfig::from_pipeline(cfg).unwrap_or_default().sim;
+    let mut q = microrobot_actuator::initial_q(robot, &sim);
     for (i, j) in robot.joints().iter().enumerate() {
         if !j.limits.contains(q[i]) {
             f.warnings.push(format!(

@@ -448,13 +448,14 @@ fn failure(e: anyhow::Error) -> Fail {
 
 /// Loads the config for the check: a private instance, lockstep as asked.
 fn load_config(args: &DriverCheckArgs) -> anyhow::Result<PipelineConfig> {
-    let mut cfg = PipelineConfig::load(&args.config).map_err(anyhow::Error::new)?;
+    let mut cfg = microrobot_config::load(&args.config).map_err(anyhow::Error::new)?;
     cfg.instance = format!("drvcheck-{}", std::process::id());
     cfg.lockstep = args.lockstep;
     cfg.program = None;
     let origin = format!("{} (driver-check)", args.config.display());
     let base = args.config.parent().unwrap_or(Path::new("."));
-    PipelineConfig::from_toml_str(&cfg.to_toml_string(), &origin, base).map_err(anyhow::Error::new)
+    microrobot_config::from_toml_str(&cfg.to_toml_string(), &origin, base)
+        .map_err(anyhow::Error::new)
 }
 
 /// The driver's launch, as `microrobot run` builds it (this process is its supervisor).

@@ -8,8 +8,9 @@
 
 use std::path::{Path, PathBuf};
 
+use microrobot_actuator::ActuatorConfig;
 use microrobot_model::{JointKind, Robot};
-use microrobot_runtime::config::PipelineConfig;
+use microrobot_runtime::config::{ConfigError, OwnedSection as _, PipelineConfig};
 use toml::{Table, Value};
 
 /// The environment variable naming the file.
@@ -24,11 +25,11 @@ pub fn path_beside(resolved: &Path) -> PathBuf {
 /// The start position is the configured one (`actuator.sim.initial_q_deg`, clamped into
 /// the limits); a restarted driver gets the arm's last state in `MICROROBOT_RESUME_STATE`.
 /// Written with the `toml` crate, so names and numbers round-trip exactly.
-pub fn render(cfg: &PipelineConfig, robot: &Robot, resolved: &Path) -> String {
-    let start = microrobot_actuator::initial_q(robot, cfg);
+pub fn render(cfg: &PipelineConfig, robot: &Robot, resolved: &Path) -> Result<String, ConfigError> {
+    let a = &ActuatorConfig::from_pipeline(cfg)?;
+    let start = microrobot_actuator::initial_q(robot, &a.sim);
     let path = |p: &Path| Value::String(p.display().to_string());
     let w = &cfg.watchdog;
-    let a = &cfg.actuator;
     let watchdog = Table::from_iter([
         ("stale_ms".to_string(), Value::Float(w.stale_ms)),
         ("fault_ms".to_string(), Value::Float(w.fault_ms)),
@@ -82,11 +83,11 @@ pub fn render(cfg: &PipelineConfig, robot: &Robot, resolved: &Path) -> String {
         ("hold".to_string(), Value::Table(hold)),
         ("joints".to_string(), Value::Array(joints)),
     ]);
-    format!(
+    Ok(format!(
         "# What an actuator driver needs for this run, written by the supervisor.\n\
          # SI units, named in each key; a driver needs nothing else (the contract page of\n\
          # the messages crate describes every key).\n{file}"
-    )
+    ))
 }
 
 /// Writes [`render`] beside the resolved config (owner-only, never through a symlink):
@@ -94,7 +95,7 @@ pub fn render(cfg: &PipelineConfig, robot: &Robot, resolved: &Path) -> String {
 pub fn write(cfg: &PipelineConfig, robot: &Robot, resolved: &Path) -> anyhow::Result<()> {
     crate::instance::write_private(
         &path_beside(resolved),
-        render(cfg, robot, resolved).as_bytes(),
+        render(cfg, robot, resolved)?.as_bytes(),
     )
 }
 
@@ -123,12 +124,11 @@ mod tests {
             ..PipelineConfig::default()
         };
         // Revolute start in degrees, prismatic in mm; the prismatic one past its limit.
-        cfg.actuator.sim.initial_q_deg = Some(vec![90.0, 45.0, 400.0]);
-        let t = parse(&render(
-            &cfg,
-            &r,
-            Path::new("/run/x/pipeline.resolved.toml"),
-        ));
+        let mut actuator = ActuatorConfig::default();
+        actuator.sim.initial_q_deg = Some(vec![90.0, 45.0, 400.0]);
+        actuator.store(&mut cfg);
+        let t =
+            parse(&render(&cfg, &r, Path::new("/run/x/pipeline.resolved.toml")).expect("render"));
         assert_eq!(t["rate_hz"].as_float(), Some(4000.0));
         assert_eq!(t["lockstep"].as_bool(), Some(true));
         assert_eq!(t["dof"].as_integer(), Some(3));
@@ -156,9 +156,13 @@ mod tests {
         let mut cfg = PipelineConfig::default();
         cfg.watchdog.stale_ms = 12.5;
         cfg.watchdog.safe_state = SafeStateMode::Damp;
-        cfg.actuator.hold_kp_per_s2 = 123.0;
+        ActuatorConfig {
+            hold_kp_per_s2: 123.0,
+            ..ActuatorConfig::default()
+        }
+        .store(&mut cfg);
         cfg.instance = "we\"ird".to_string();
-        let t = parse(&render(&cfg, &r, Path::new("/r/p.toml")));
+        let t = parse(&render(&cfg, &r, Path::new("/r/p.toml")).expect("render"));
         assert_eq!(t["instance"].as_str(), Some("we\"ird"));
         assert_eq!(t["watchdog"]["stale_ms"].as_float(), Some(12.5));
         assert_eq!(t["watchdog"]["safe_state"].as_str(), Some("damp"));

@@ -21,7 +21,7 @@ use microrobot_messages::{
     Activity, LifecycleState, ProgramEnd, ProgramState, ServiceRole, ServiceStatus, monotonic_ns,
 };
 use microrobot_model::Robot;
-use microrobot_runtime::config::FailurePolicy;
+use microrobot_runtime::config::{FailurePolicy, OwnedSection as _};
 use microrobot_runtime::{PipelineConfig, exit_code};
 
 use crate::binaries::ServiceBinaries;
@@ -334,7 +334,7 @@ impl Stop {
 /// Loads the config and applies the command-line overrides; every value is validated
 /// again by the config loader, so an override is checked exactly like a file key.
 pub fn resolve_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
-    let mut cfg = PipelineConfig::load(&args.config).map_err(anyhow::Error::new)?;
+    let mut cfg = microrobot_config::load(&args.config).map_err(anyhow::Error::new)?;
     let mut overridden = false;
     if let Some(d) = args.duration {
         cfg.duration_s = Some(d);
@@ -371,17 +371,24 @@ pub fn resolve_config(args: &RunArgs) -> anyhow::Result<PipelineConfig> {
         overridden = true;
     }
     if args.no_feedback {
-        cfg.dynamics.feedback = false;
+        let dynamics = microrobot_dynamics::DynamicsConfig::from_pipeline(&cfg)?;
+        microrobot_dynamics::DynamicsConfig {
+            feedback: false,
+            ..dynamics
+        }
+        .store(&mut cfg);
         overridden = true;
     }
     if let Some(m) = args.mass_scale {
-        cfg.actuator.sim.mass_scale = m;
+        let mut actuator = microrobot_actuator::ActuatorConfig::from_pipeline(&cfg)?;
+        actuator.sim.mass_scale = m;
+        actuator.store(&mut cfg);
         overridden = true;
     }
     if overridden {
         let origin = format!("{} with command-line overrides", args.config.display());
         let base = args.config.parent().unwrap_or(Path::new("."));
-        cfg = PipelineConfig::from_toml_str(&cfg.to_toml_string(), &origin, base)
+        cfg = microrobot_config::from_toml_str(&cfg.to_toml_string(), &origin, base)
             .map_err(anyhow::Error::new)?;
     }
     Ok(cfg)
@@ -524,7 +531,10 @@ fn launch_for(
     resolved: &Path,
     run_dir: &Path,
 ) -> Launch {
-    let argv = match (&cfg.actuator.command, role) {
+    let command = microrobot_actuator::ActuatorConfig::from_pipeline(cfg)
+        .ok()
+        .and_then(|a| a.command);
+    let argv = match (&command, role) {
         (Some(cmd), ServiceRole::Actuator) => driver_argv(cmd, cfg, resolved, run_dir),
         _ => vec![
             binaries.path(role).display().to_string(),
@@ -1199,7 +1209,8 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
             stop_reason: stop.name().to_string(),
             rate_hz: cfg.rate_hz,
             lockstep: cfg.lockstep,
-            feedback: cfg.dynamics.feedback,
+            feedback: microrobot_dynamics::DynamicsConfig::from_pipeline(&cfg)
+                .is_ok_and(|d| d.feedback),
             wall_time_s: started.elapsed().as_secs_f64(),
             dof,
             joints: robot

@@ -11,12 +11,13 @@
 //! the first tick the actuator publishes its initial state.
 
 use anyhow::{Context as _, Result, anyhow, bail};
-use microrobot_actuator::{ActuatorCore, SimArm, initial_q};
-use microrobot_dynamics::DynamicsCore;
+use microrobot_actuator::{ActuatorConfig, ActuatorCore, SimArm, initial_q};
+use microrobot_dynamics::{DynamicsConfig, DynamicsCore};
 use microrobot_messages::{JointSetpoint, JointState, TorqueCommand};
 use microrobot_planner::PlannerCore;
 use microrobot_planner::program::ProgramRunner;
 use microrobot_runtime::PipelineConfig;
+use microrobot_runtime::config::OwnedSection as _;
 
 /// One publisher per stream, as a single planner, dynamics and actuator give.
 const PUBLISHER: u128 = 1;
@@ -64,8 +65,13 @@ impl ClosedLoop {
             ),
             None => None,
         };
-        let sim = SimArm::new(&robot, &cfg.actuator.sim, &initial_q(&robot, cfg));
-        let mut actuator = ActuatorCore::new(sim, &robot, cfg)
+        let actuator_cfg = ActuatorConfig::from_pipeline(cfg)?;
+        let sim = SimArm::new(
+            &robot,
+            &actuator_cfg.sim,
+            &initial_q(&robot, &actuator_cfg.sim),
+        );
+        let mut actuator = ActuatorCore::new(sim, &robot, cfg, &actuator_cfg)
             .map_err(|e| anyhow!("simulated arm: {e}"))
             .context("closed-loop replay")?;
         let period_ns = cfg.period_ns();
@@ -77,7 +83,7 @@ impl ClosedLoop {
         planner.accept_state(&state, PUBLISHER, now_ns);
         Ok(Self {
             planner,
-            dynamics: DynamicsCore::new(&robot, cfg),
+            dynamics: DynamicsCore::new(&robot, cfg, &DynamicsConfig::from_pipeline(cfg)?),
             actuator,
             state,
             now_ns,
@@ -226,7 +232,7 @@ mod tests {
         let text = format!(
             "robot = \"config/robots/seed-arm.toml\"\nprogram = \"config/programs/seed-table4.toml\"\nlockstep = {lockstep}\n"
         );
-        match PipelineConfig::from_toml_str(&text, "test.toml", root) {
+        match microrobot_config::from_toml_str(&text, "test.toml", root) {
             Ok(c) => c,
             Err(e) => panic!("{e}"),
         }

@@ -15,10 +15,11 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, Result, anyhow, bail};
-use microrobot_dynamics::DynamicsCore;
+use microrobot_dynamics::{DynamicsConfig, DynamicsCore};
 use microrobot_messages::{JointSetpoint, JointState, MAX_JOINTS, TorqueCommand};
 use microrobot_model::Robot;
 use microrobot_runtime::PipelineConfig;
+use microrobot_runtime::config::OwnedSection as _;
 use serde::Serialize;
 
 use super::closed_loop::{
@@ -62,20 +63,20 @@ pub struct ReplayReport {
 
 fn load_config(args: &ReplayArgs, rec: &Recording) -> Result<(PipelineConfig, String)> {
     if let Some(path) = &args.config {
-        let cfg = PipelineConfig::load(path).map_err(anyhow::Error::new)?;
+        let cfg = microrobot_config::load(path).map_err(anyhow::Error::new)?;
         return Ok((cfg, path.display().to_string()));
     }
     if let Some(data) = rec.attachments.get(CONFIG_ATTACHMENT) {
         let origin = format!("{} (attachment {CONFIG_ATTACHMENT})", args.file.display());
         let text = std::str::from_utf8(data)
             .map_err(|_| anyhow!("{origin}: not UTF-8 text; pass --config"))?;
-        let cfg = PipelineConfig::from_toml_str(text, &origin, Path::new("."))
+        let cfg = microrobot_config::from_toml_str(text, &origin, Path::new("."))
             .map_err(anyhow::Error::new)
             .context("the attached config does not load here; pass --config")?;
         return Ok((cfg, origin));
     }
     let path = PathBuf::from("config/pipeline.toml");
-    let cfg = PipelineConfig::load(&path).map_err(anyhow::Error::new)?;
+    let cfg = microrobot_config::load(&path).map_err(anyhow::Error::new)?;
     Ok((cfg, path.display().to_string()))
 }
 
@@ -132,7 +133,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ReplayReport> {
 
     // One publisher id per stream, as a single planner and actuator give.
     const PUBLISHER: u128 = 1;
-    let mut core = DynamicsCore::new(&robot, &cfg);
+    let mut core = DynamicsCore::new(&robot, &cfg, &DynamicsConfig::from_pipeline(&cfg)?);
     let mut fed: Option<u64> = None;
     let mut report = ReplayReport {
         file: file.display().to_string(),

@@ -11,7 +11,6 @@
 use anyhow::{Context as _, Result};
 use microrobot_messages::{JointSetpoint, JointState, MAX_JOINTS};
 use microrobot_model::{JointVector, ModelData, Pose, Robot, forward_kinematics};
-use microrobot_runtime::config::PipelineConfig;
 use nalgebra::UnitQuaternion;
 use serde_json::{Value, json};
 
@@ -237,7 +236,7 @@ impl Feed {
 impl Viewer {
     /// The robot named by a resolved pipeline config's text (`origin` names it in errors).
     pub fn from_config_text(text: &str, origin: &str) -> Result<Self> {
-        let cfg = PipelineConfig::from_toml_str(text, origin, std::path::Path::new("."))
+        let cfg = microrobot_config::from_toml_str(text, origin, std::path::Path::new("."))
             .map_err(anyhow::Error::new)?;
         let robot = Robot::from_file(&cfg.robot)
             .map_err(|e| anyhow::anyhow!("robot file {}: {e}", cfg.robot.display()))

@@ -1,10 +1,10 @@
-//! `[teleop]`: the planner's teleoperation mode (a master device drives the arm).
+//! `[teleop]` of the pipeline file: the planner's teleoperation mode (a master device
+//! drives the arm), read from the raw section the runtime hands out
+//! ([`PipelineConfig::section`]) and converted to SI.
 
-use std::fmt::Write as _;
-
-use microrobot_keypath::{Range, Table as KeyTable};
-
-use super::{Reader, Res, fmt_f64};
+use microrobot_keypath::Range;
+use microrobot_runtime::config::{ConfigError, OwnedSection, PipelineConfig};
+use toml::{Table, Value};
 
 /// `[teleop]`, converted to SI at load.
 #[derive(Debug, Clone, PartialEq)]
@@ -37,6 +37,7 @@ pub struct TeleopConfig {
 }
 
 impl Default for TeleopConfig {
+    /// The built-in defaults (what an absent section gives).
     fn default() -> Self {
         Self {
             enabled: false,
@@ -54,61 +55,69 @@ impl Default for TeleopConfig {
     }
 }
 
-impl Reader<'_> {
-    pub(super) fn teleop(&self, top: &KeyTable<'_>, rate_hz: f64) -> Res<TeleopConfig> {
-        let t = top.section(
-            "teleop",
-            &[
-                "enabled",
-                "ratio",
-                "frame_rpy_deg",
-                "filter_order",
-                "filter_cutoff_hz",
-                "max_tool_vel_mm_s",
-                "max_tool_acc_mm_s2",
-                "master_timeout_ms",
-                "singularity_sigma_mm",
-                "flip_threshold_deg",
-                "workspace_tolerance_mm",
-            ],
-        )?;
-        let d = TeleopConfig::default();
+impl OwnedSection for TeleopConfig {
+    const NAME: &'static str = "teleop";
+
+    /// Reads `[teleop]` of `cfg`: every key checked (unknown ones refused), absent ones
+    /// defaulted, mm and deg converted to m and rad; the filter cutoff must lie below
+    /// 0.45 × `cfg.rate_hz`. Errors name the file and the key.
+    fn from_pipeline(cfg: &PipelineConfig) -> Result<Self, ConfigError> {
+        let rate_hz = cfg.rate_hz;
+        let t = cfg.section(Self::NAME)?;
+        t.allow(&[
+            "enabled",
+            "ratio",
+            "frame_rpy_deg",
+            "filter_order",
+            "filter_cutoff_hz",
+            "max_tool_vel_mm_s",
+            "max_tool_acc_mm_s2",
+            "master_timeout_ms",
+            "singularity_sigma_mm",
+            "flip_threshold_deg",
+            "workspace_tolerance_mm",
+        ])?;
+        let d = Self::default();
         let frame_rpy = match t.get("frame_rpy_deg") {
             None => d.frame_rpy,
-            Some(toml::Value::Array(items)) if items.len() == 3 => {
+            Some(Value::Array(items)) if items.len() == 3 => {
                 let mut out = [0.0; 3];
                 for (i, it) in items.iter().enumerate() {
-                    let k = format!("teleop.frame_rpy_deg[{i}]");
+                    let k = format!("frame_rpy_deg[{i}]");
                     let v = match it {
-                        toml::Value::Float(v) => *v,
-                        toml::Value::Integer(v) => *v as f64,
-                        _ => return Err(self.err(&k, "expected a number")),
+                        Value::Float(v) => *v,
+                        Value::Integer(v) => *v as f64,
+                        _ => return Err(t.invalid(&k, "expected a number").into()),
                     };
                     if !(v.is_finite() && v.abs() <= 360.0) {
-                        return Err(
-                            self.err(&k, format!("{v} must be a finite angle in [-360, 360] deg"))
-                        );
+                        return Err(t
+                            .invalid(&k, format!("{v} must be a finite angle in [-360, 360] deg"))
+                            .into());
                     }
                     out[i] = v.to_radians();
                 }
                 out
             }
             Some(_) => {
-                return Err(self.err(
-                    "teleop.frame_rpy_deg",
-                    "expected 3 numbers: roll, pitch, yaw (deg)",
-                ));
+                return Err(t
+                    .invalid(
+                        "frame_rpy_deg",
+                        "expected 3 numbers: roll, pitch, yaw (deg)",
+                    )
+                    .into());
             }
         };
         let filter_order = t.integer_in("filter_order", d.filter_order as u64, 2, 8)? as u32;
         if !filter_order.is_multiple_of(2) {
-            return Err(self.err(
-                "teleop.filter_order",
-                format!("{filter_order} must be 2, 4, 6 or 8"),
-            ));
+            return Err(t
+                .invalid(
+                    "filter_order",
+                    format!("{filter_order} must be 2, 4, 6 or 8"),
+                )
+                .into());
         }
         let ms = 1e-3;
-        Ok(TeleopConfig {
+        Ok(Self {
             enabled: t.bool_or("enabled", d.enabled)?,
             ratio: t.number_in("ratio", d.ratio, Range::closed(0.1, 100.0))?,
             frame_rpy,
@@ -152,39 +161,36 @@ impl Reader<'_> {
             )? * ms,
         })
     }
-}
 
-/// Appends `[teleop]` to `s` in the file's units.
-pub(super) fn write_toml(t: &TeleopConfig, s: &mut String) {
-    let f = fmt_f64;
-    let _ = writeln!(s, "\n[teleop]");
-    let _ = writeln!(s, "enabled = {}", t.enabled);
-    let _ = writeln!(s, "ratio = {}", f(t.ratio));
-    let _ = writeln!(
-        s,
-        "frame_rpy_deg = [{}, {}, {}]",
-        f(t.frame_rpy[0].to_degrees()),
-        f(t.frame_rpy[1].to_degrees()),
-        f(t.frame_rpy[2].to_degrees())
-    );
-    let _ = writeln!(s, "filter_order = {}", t.filter_order);
-    let _ = writeln!(s, "filter_cutoff_hz = {}", f(t.filter_cutoff_hz));
-    let _ = writeln!(s, "max_tool_vel_mm_s = {}", f(t.max_tool_velocity * 1e3));
-    let _ = writeln!(
-        s,
-        "max_tool_acc_mm_s2 = {}",
-        f(t.max_tool_acceleration * 1e3)
-    );
-    let _ = writeln!(s, "master_timeout_ms = {}", f(t.master_timeout_ms));
-    let _ = writeln!(s, "singularity_sigma_mm = {}", f(t.singularity_sigma * 1e3));
-    let _ = writeln!(
-        s,
-        "flip_threshold_deg = {}",
-        f(t.flip_threshold.to_degrees())
-    );
-    let _ = writeln!(
-        s,
-        "workspace_tolerance_mm = {}",
-        f(t.workspace_tolerance * 1e3)
-    );
+    fn to_table(&self) -> Table {
+        let mut t = Table::new();
+        t.insert("enabled".into(), self.enabled.into());
+        t.insert("ratio".into(), self.ratio.into());
+        let rpy: Vec<f64> = self.frame_rpy.iter().map(|a| a.to_degrees()).collect();
+        t.insert("frame_rpy_deg".into(), rpy.into());
+        t.insert("filter_order".into(), i64::from(self.filter_order).into());
+        t.insert("filter_cutoff_hz".into(), self.filter_cutoff_hz.into());
+        t.insert(
+            "max_tool_vel_mm_s".into(),
+            (self.max_tool_velocity * 1e3).into(),
+        );
+        t.insert(
+            "max_tool_acc_mm_s2".into(),
+            (self.max_tool_acceleration * 1e3).into(),
+        );
+        t.insert("master_timeout_ms".into(), self.master_timeout_ms.into());
+        t.insert(
+            "singularity_sigma_mm".into(),
+            (self.singularity_sigma * 1e3).into(),
+        );
+        t.insert(
+            "flip_threshold_deg".into(),
+            self.flip_threshold.to_degrees().into(),
+        );
+        t.insert(
+            "workspace_tolerance_mm".into(),
+            (self.workspace_tolerance * 1e3).into(),
+        );
+        t
+    }
 }

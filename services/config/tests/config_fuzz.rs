@@ -4,7 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
-use microrobot_runtime::PipelineConfig;
+use microrobot_actuator::ActuatorConfig;
+use microrobot_config::{from_toml_str, load};
+use microrobot_dynamics::DynamicsConfig;
+use microrobot_runtime::config::OwnedSection;
 use proptest::prelude::*;
 
 fn config_dir() -> PathBuf {
@@ -16,15 +19,15 @@ fn shipped() -> String {
 }
 
 fn check(text: &str) {
-    match PipelineConfig::from_toml_str(text, "fuzz.toml", &config_dir()) {
+    match from_toml_str(text, "fuzz.toml", &config_dir()) {
         Ok(c) => {
             assert!(c.rate_hz.is_finite() && c.rate_hz > 0.0);
             assert!(c.watchdog.stale_ms.is_finite() && c.watchdog.fault_ms >= c.watchdog.stale_ms);
-            assert!(c.dynamics.kp_per_s2.is_finite() && c.actuator.sim.mass_scale.is_finite());
+            let dynamics = DynamicsConfig::from_pipeline(&c).unwrap();
+            let actuator = ActuatorConfig::from_pipeline(&c).unwrap();
+            assert!(dynamics.kp_per_s2.is_finite() && actuator.sim.mass_scale.is_finite());
             // What loads also round-trips.
-            let back =
-                PipelineConfig::from_toml_str(&c.to_toml_string(), "re.toml", Path::new("/"))
-                    .unwrap();
+            let back = from_toml_str(&c.to_toml_string(), "re.toml", Path::new("/")).unwrap();
             assert_eq!(back, c);
         }
         Err(e) => assert!(e.to_string().starts_with("fuzz.toml: "), "{e}"),
@@ -33,7 +36,7 @@ fn check(text: &str) {
 
 #[test]
 fn the_shipped_config_loads() {
-    PipelineConfig::load(&config_dir().join("pipeline.toml")).unwrap();
+    load(&config_dir().join("pipeline.toml")).unwrap();
 }
 
 proptest! {
@@ -74,7 +77,7 @@ fn the_config_corpus_never_panics() {
         // Not every corpus file is valid UTF-8 on purpose: those must be refused too.
         match String::from_utf8(bytes) {
             Ok(text) => check(&text),
-            Err(_) => assert!(PipelineConfig::load(&path).is_err(), "{}", path.display()),
+            Err(_) => assert!(load(&path).is_err(), "{}", path.display()),
         }
         n += 1;
     }
