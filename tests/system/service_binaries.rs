@@ -54,13 +54,14 @@ fn a_service_binary_without_arguments_exits_with_the_usage_code() {
 }
 
 #[test]
-fn every_service_binary_is_of_the_clis_build() {
+fn every_real_time_binary_is_of_the_clis_build() {
     let version = Command::new(bin())
         .arg("--version")
         .output()
         .expect("microrobot --version");
     let version = String::from_utf8_lossy(&version.stdout).into_owned();
-    for role in ["planner", "dynamics", "actuator"] {
+    // The three services and the bare chain's link (`probe-chain`).
+    for role in ["planner", "dynamics", "actuator", "chain-link"] {
         let out = Command::new(service_bin(role))
             .arg("--build-id")
             .output()

@@ -1,33 +1,22 @@
 //! `microrobot probe-chain`: the machine's floor for the pipeline's end-to-end latency
-//! and CPU cost, measured the way [`microrobot_supervisor::run`]'s `--floor-probe` measures the timer
+//! and CPU cost, measured the way `microrobot run --floor-probe` measures the timer
 //! floor for lateness.
 //!
-//! Three processes, started from this binary, with the pipeline's real-time settings
-//! (CPU affinity, SCHED_FIFO, PM QoS, timer slack, mlockall; from the config) and the
-//! pipeline's own bus hops: a *source* ticks on a timerfd at `rate_hz` and publishes a
-//! [`JointSetpoint`], a *relay* woken by it publishes a [`TorqueCommand`], and a *sink*
-//! woken by that records `receive time − setpoint publish time`. Each waits on the same
-//! [`Reactor`] and notifies through the same iceoryx2 event services as the pipeline,
-//! and does no other work. The difference between this chain and `microrobot run` at
-//! the same rate is what the services' own work costs; the chain itself is what the
-//! machine, kernel and iceoryx2 cost.
+//! It starts three processes of the slim binary `microrobot-chain-link` (sink, relay,
+//! source; see [`microrobot_chain_link`]): the pipeline's bus hops, payloads and
+//! real-time settings, no work; each reports one JSON line at its end, and this sums
+//! them up. The difference between this chain and `microrobot run` at the same rate is
+//! what the services' own work costs; the chain itself is what the machine, kernel and
+//! iceoryx2 cost.
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
 use anyhow::Context as _;
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::Publisher;
-use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::service::ipc;
-use microrobot_messages::{
-    JointSetpoint, ServiceKind, TorqueCommand, monotonic_ns, open_event, open_publish_subscribe,
-};
+use microrobot_chain_link::{Link, LinkReport};
+use microrobot_messages::LatencySummary;
 use microrobot_runtime::config::PipelineConfig;
-use microrobot_runtime::node::named_node;
-use microrobot_runtime::stats::LatencyHistogram;
-use microrobot_runtime::{PeriodicClock, Reactor};
 use serde::{Deserialize, Serialize};
 
 use microrobot_supervisor::summary::Percentiles;
@@ -48,29 +37,11 @@ pub struct ProbeChainArgs {
     /// is an alias).
     #[arg(long = "summary-json", visible_alias = "json", value_name = "FILE")]
     pub json: Option<PathBuf>,
-    /// Internal: run one link of the chain (the parent starts these).
-    #[arg(long, value_enum, hide = true)]
-    pub link: Option<Link>,
-    /// Internal: the chain's instance name.
-    #[arg(long, hide = true)]
-    pub instance: Option<String>,
 }
 
-/// One process of the chain.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Link {
-    /// Ticks on the timer and publishes a setpoint (the planner's place).
-    Source,
-    /// Woken by the setpoint, publishes a torque command (the dynamics' place).
-    Relay,
-    /// Woken by the torque command, records the end-to-end latency (the actuator's place).
-    Sink,
-}
-
-/// What one link reports on its stdout when it ends (one JSON line).
+/// One link's report in the chain's result: its [`LinkReport`] with the latency in µs.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct LinkReport {
+pub struct LinkSummary {
     pub link: Link,
     /// Wake-ups that found work (ticks, messages).
     pub wakes: u64,
@@ -84,6 +55,22 @@ pub struct LinkReport {
     pub deadline_misses: u64,
     /// Relay, sink: sequence gaps seen.
     pub lost_messages: u64,
+}
+
+impl From<LinkReport> for LinkSummary {
+    fn from(r: LinkReport) -> Self {
+        Self {
+            link: r.link,
+            wakes: r.wakes,
+            cpu_s: r.cpu_s,
+            wall_s: r.wall_s,
+            latency_us: r
+                .latency
+                .map(|l| Percentiles::from(&LatencySummary::from(l))),
+            deadline_misses: r.deadline_misses,
+            lost_messages: r.lost_messages,
+        }
+    }
 }
 
 /// The chain's result (`--json`).
@@ -103,7 +90,7 @@ pub struct ChainReport {
     pub cpu_percent_total: f64,
     /// CPU per wake-up, µs, averaged over the three links.
     pub cpu_per_wake_us: f64,
-    pub links: Vec<LinkReport>,
+    pub links: Vec<LinkSummary>,
 }
 
 /// Runs the probe (parent) or one link (child).
@@ -116,15 +103,11 @@ pub fn main(args: ProbeChainArgs) -> anyhow::Result<()> {
         }
         cfg.rate_hz = r;
     }
-    match (args.link, &args.instance) {
-        (Some(link), Some(instance)) => run_link(link, instance, &cfg, args.duration),
-        (None, _) => run_parent(&args, &cfg),
-        (Some(_), None) => anyhow::bail!("--link needs --instance"),
-    }
+    run_chain(&args, &cfg)
 }
 
-fn run_parent(args: &ProbeChainArgs, cfg: &PipelineConfig) -> anyhow::Result<()> {
-    let exe = std::env::current_exe().context("own executable")?;
+fn run_chain(args: &ProbeChainArgs, cfg: &PipelineConfig) -> anyhow::Result<()> {
+    let exe = microrobot_supervisor::binaries::locate_chain_link()?;
     let instance = format!("chainprobe{}", std::process::id());
     let rt = cfg.service_realtime();
     eprintln!(
@@ -142,7 +125,6 @@ fn run_parent(args: &ProbeChainArgs, cfg: &PipelineConfig) -> anyhow::Result<()>
     // Sink first, source last: each link is listening before anyone sends to it.
     for link in [Link::Sink, Link::Relay, Link::Source] {
         let mut child = Command::new(&exe)
-            .arg("probe-chain")
             .arg("--config")
             .arg(&args.config)
             .arg("--rate-hz")
@@ -150,22 +132,19 @@ fn run_parent(args: &ProbeChainArgs, cfg: &PipelineConfig) -> anyhow::Result<()>
             .arg("--duration")
             .arg(args.duration.to_string())
             .arg("--link")
-            .arg(link_name(link))
+            .arg(link.name())
             .arg("--instance")
             .arg(&instance)
             .stdout(Stdio::piped())
             .spawn()
-            .with_context(|| format!("start the {} link", link_name(link)))?;
+            .with_context(|| format!("start the {} link", link.name()))?;
         let stdout = child.stdout.take().context("child stdout")?;
         let mut lines = BufReader::new(stdout).lines();
         match lines.next() {
             Some(Ok(l)) if l == "ready" => {}
             other => {
                 let _ = child.kill();
-                anyhow::bail!(
-                    "the {} link did not become ready: {other:?}",
-                    link_name(link)
-                );
+                anyhow::bail!("the {} link did not become ready: {other:?}", link.name());
             }
         }
         children.push((link, child, lines));
@@ -175,14 +154,11 @@ fn run_parent(args: &ProbeChainArgs, cfg: &PipelineConfig) -> anyhow::Result<()>
         let line = lines.next().transpose().context("read a link's report")?;
         let status = child.wait().context("wait for a link")?;
         let line = line.with_context(|| {
-            format!(
-                "the {} link ended without a report ({status})",
-                link_name(link)
-            )
+            format!("the {} link ended without a report ({status})", link.name())
         })?;
         let report: LinkReport = serde_json::from_str(&line)
-            .with_context(|| format!("the {} link's report `{line}`", link_name(link)))?;
-        links.push(report);
+            .with_context(|| format!("the {} link's report `{line}`", link.name()))?;
+        links.push(LinkSummary::from(report));
     }
     links.sort_by_key(|l| l.link as u8);
     let report = summarise(cfg.rate_hz, args.duration, links)?;
@@ -194,24 +170,20 @@ fn run_parent(args: &ProbeChainArgs, cfg: &PipelineConfig) -> anyhow::Result<()>
     Ok(())
 }
 
-fn link_name(link: Link) -> &'static str {
-    match link {
-        Link::Source => "source",
-        Link::Relay => "relay",
-        Link::Sink => "sink",
-    }
-}
-
-fn summarise(rate_hz: f64, duration_s: f64, links: Vec<LinkReport>) -> anyhow::Result<ChainReport> {
+fn summarise(
+    rate_hz: f64,
+    duration_s: f64,
+    links: Vec<LinkSummary>,
+) -> anyhow::Result<ChainReport> {
     let find = |l: Link| {
         links
             .iter()
             .find(|r| r.link == l)
-            .with_context(|| format!("no report from the {} link", link_name(l)))
+            .with_context(|| format!("no report from the {} link", l.name()))
     };
     let source = find(Link::Source)?;
     let sink = find(Link::Sink)?;
-    let pct = |r: &LinkReport| {
+    let pct = |r: &LinkSummary| {
         if r.wall_s > 0.0 {
             100.0 * r.cpu_s / r.wall_s
         } else {
@@ -258,7 +230,7 @@ fn print_report(r: &ChainReport) {
     let per: Vec<String> = r
         .cpu_percent
         .iter()
-        .map(|(l, c)| format!("{} {c:.2} %", link_name(*l)))
+        .map(|(l, c)| format!("{} {c:.2} %", l.name()))
         .collect();
     println!(
         "CPU: {} = {:.2} % of one core; {:.1} µs per wake-up",
@@ -266,185 +238,4 @@ fn print_report(r: &ChainReport) {
         r.cpu_percent_total,
         r.cpu_per_wake_us
     );
-}
-
-/// What the relay and the sink do with a wake-up's samples.
-#[allow(clippy::large_enum_variant)] // one value per process, built once
-enum Hop {
-    /// Answer each setpoint with a torque command.
-    Relay {
-        sub: Subscriber<ipc::Service, JointSetpoint, ()>,
-        publisher: Publisher<ipc::Service, TorqueCommand, ()>,
-        notifier: Notifier<ipc::Service>,
-    },
-    /// Record each torque command's end-to-end latency.
-    Sink {
-        sub: Subscriber<ipc::Service, TorqueCommand, ()>,
-    },
-}
-
-/// A port of the chain, or an error naming it.
-fn port<T, E: std::fmt::Debug>(r: Result<T, E>, what: &str) -> anyhow::Result<T> {
-    r.map_err(|e| anyhow::anyhow!("{what}: {e:?}"))
-}
-
-/// CPU time of this process, seconds.
-fn cpu_time_s() -> f64 {
-    microrobot_runtime::stats::cpu_time_ns() as f64 * 1e-9
-}
-
-fn run_link(
-    link: Link,
-    instance: &str,
-    cfg: &PipelineConfig,
-    duration_s: f64,
-) -> anyhow::Result<()> {
-    // Stop with the parent.
-    // SAFETY: plain prctl.
-    unsafe { libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL, 0, 0, 0) };
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
-    let rt_cfg = cfg.service_realtime();
-    let mut rt = microrobot_runtime::rt::prepare(&rt_cfg);
-    let node = named_node(&format!("{instance}.{}", link_name(link)))?;
-    let sp = open_publish_subscribe::<JointSetpoint>(&node, instance, ServiceKind::Setpoint)?;
-    let sp_event = open_event(&node, instance, ServiceKind::Setpoint)?;
-    let tq = open_publish_subscribe::<TorqueCommand>(&node, instance, ServiceKind::Torque)?;
-    let tq_event = open_event(&node, instance, ServiceKind::Torque)?;
-    let period_ns = cfg.period_ns();
-    let end_ticks = (duration_s * cfg.rate_hz).round().max(1.0) as u64;
-    let mut hist = LatencyHistogram::new();
-    let mut wakes = 0u64;
-    let mut lost = 0u64;
-    let mut misses = 0u64;
-    let ready = || {
-        let mut out = std::io::stdout().lock();
-        let _ = writeln!(out, "ready");
-        let _ = out.flush();
-    };
-    let (cpu0, wall0, cpu1, wall1);
-    match link {
-        Link::Source => {
-            let publisher = port(sp.publisher_builder().create(), "publisher")?;
-            let notifier = port(sp_event.notifier_builder().create(), "notifier")?;
-            // Give the others' subscribers a moment to connect to the new publisher.
-            std::thread::sleep(std::time::Duration::from_millis(100));
-            ready();
-            let PeriodicClock { timer, mut ticker } =
-                PeriodicClock::start(period_ns, rt_cfg.overrun)?;
-            let mut reactor = Reactor::new()?;
-            let on_timer = reactor.add(&timer)?;
-            microrobot_runtime::rt::enter_cycle(&rt_cfg, &mut rt);
-            (cpu0, wall0) = (cpu_time_s(), monotonic_ns());
-            // One setpoint per tick, as the planner: catch-up ticks back to back.
-            let mut seq = 0u64;
-            while seq < end_ticks {
-                if !reactor.wait()?.contains(on_timer) {
-                    continue;
-                }
-                let now = monotonic_ns();
-                ticker.on_expirations(timer.read_expirations());
-                wakes += 1;
-                while seq < end_ticks
-                    && let Some(t) = ticker.next_tick()
-                {
-                    hist.record(now.saturating_sub(t.ideal_ns));
-                    seq += 1;
-                    let mut msg = JointSetpoint::default();
-                    msg.header.seq = seq;
-                    msg.header.tick = t.index;
-                    msg.header.stamp_ns = monotonic_ns();
-                    msg.header.source_stamp_ns = msg.header.stamp_ns;
-                    if publisher.send_copy(msg).is_ok() {
-                        let _ = notifier.notify();
-                    }
-                }
-            }
-            misses = ticker.deadline_misses;
-            (cpu1, wall1) = (cpu_time_s(), monotonic_ns());
-            // Let the last message through before the publisher goes away.
-            std::thread::sleep(std::time::Duration::from_millis(50));
-        }
-        Link::Relay | Link::Sink => {
-            let (listener, hop) = if link == Link::Relay {
-                let hop = Hop::Relay {
-                    sub: port(sp.subscriber_builder().create(), "subscriber")?,
-                    publisher: port(tq.publisher_builder().create(), "publisher")?,
-                    notifier: port(tq_event.notifier_builder().create(), "notifier")?,
-                };
-                (port(sp_event.listener_builder().create(), "listener")?, hop)
-            } else {
-                let hop = Hop::Sink {
-                    sub: port(tq.subscriber_builder().create(), "subscriber")?,
-                };
-                (port(tq_event.listener_builder().create(), "listener")?, hop)
-            };
-            ready();
-            let mut reactor = Reactor::new()?;
-            let on_event = reactor.add(&listener)?;
-            microrobot_runtime::rt::enter_cycle(&rt_cfg, &mut rt);
-            (cpu0, wall0) = (cpu_time_s(), monotonic_ns());
-            let mut last_seq = 0u64;
-            // A generous guard: stop if nothing arrives for 5 s.
-            while last_seq < end_ticks {
-                let ready = reactor.wait_ms(5_000)?;
-                if ready.is_empty() {
-                    break;
-                }
-                if !ready.contains(on_event) {
-                    continue;
-                }
-                let _ = listener.try_wait(|_| {});
-                wakes += 1;
-                match &hop {
-                    Hop::Relay {
-                        sub,
-                        publisher,
-                        notifier,
-                    } => {
-                        while let Ok(Some(s)) = sub.receive() {
-                            let h = s.header;
-                            drop(s);
-                            lost += h.seq.saturating_sub(last_seq + 1);
-                            last_seq = h.seq;
-                            let mut out = TorqueCommand::default();
-                            out.header.seq = h.seq;
-                            out.header.tick = h.tick;
-                            out.header.stamp_ns = monotonic_ns();
-                            out.header.source_stamp_ns = h.source_stamp_ns;
-                            if publisher.send_copy(out).is_ok() {
-                                let _ = notifier.notify();
-                            }
-                        }
-                    }
-                    Hop::Sink { sub } => {
-                        while let Ok(Some(s)) = sub.receive() {
-                            let now = monotonic_ns();
-                            let h = s.header;
-                            drop(s);
-                            hist.record(now.saturating_sub(h.source_stamp_ns));
-                            lost += h.seq.saturating_sub(last_seq + 1);
-                            last_seq = h.seq;
-                        }
-                    }
-                }
-            }
-            (cpu1, wall1) = (cpu_time_s(), monotonic_ns());
-        }
-    }
-    let cpu_s = cpu1 - cpu0;
-    let wall_s = wall1.saturating_sub(wall0) as f64 * 1e-9;
-    drop(rt);
-    let report = LinkReport {
-        link,
-        wakes,
-        cpu_s,
-        wall_s,
-        latency_us: (!hist.is_empty()).then(|| Percentiles::from(&hist.summary())),
-        deadline_misses: misses,
-        lost_messages: lost,
-    };
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "{}", serde_json::to_string(&report)?)?;
-    out.flush()?;
-    Ok(())
 }

@@ -170,6 +170,23 @@ pub fn locate_view() -> anyhow::Result<PathBuf> {
     Ok(dir.join(VIEW_BINARY))
 }
 
+/// Finds and checks `microrobot-chain-link` (the bare chain's link, a slim binary of
+/// the `microrobot` package) beside the running executable, as
+/// [`ServiceBinaries::locate`] does for the services.
+pub fn locate_chain_link() -> anyhow::Result<PathBuf> {
+    let name = microrobot_chain_link::BINARY;
+    let dir = Siblings {
+        what: "the chain probe's link",
+        names: vec![name.to_string()],
+        select: vec!["--bin".to_string(), name.to_string()],
+        in_default_build: true,
+        build_phrase: "build it",
+        copy_phrase: " and copy it beside microrobot",
+    }
+    .locate()?;
+    Ok(dir.join(name))
+}
+
 /// The id `path --build-id` prints.
 fn build_id_of(path: &Path) -> anyhow::Result<String> {
     anyhow::ensure!(path.is_file(), "{} is missing", path.display());
