@@ -187,6 +187,14 @@ impl EthercatBackend {
                 out.target_torque = 0;
             }
             bus.set_outputs(i, out);
+            // The torque applied is the one this exchange commands, as the drive
+            // receives it (target torque 0x6071 after the clamp and the per-mille
+            // quantisation), so a state names the torque of the command it answers
+            // (also when the exchange is lost: the frame may have reached the drive);
+            // the drive's torque actual 0x6077 lags an exchange behind it.
+            self.measured.tau_applied[self.joint_of_axis[i]] = self.file.axes[i]
+                .scaling
+                .effort_from_torque_actual(out.target_torque);
         }
         let t0 = Instant::now();
         let r = bus.exchange();
@@ -244,12 +252,6 @@ impl EthercatBackend {
             let s = &self.file.axes[i].scaling;
             self.measured.q[j] = s.position_from_counts(inp.position);
             self.measured.qd[j] = s.velocity_from_counts(inp.velocity);
-            // The torque applied is the one this exchange commanded, as the drive
-            // receives it (target torque 0x6071 after the clamp and the per-mille
-            // quantisation), so a state names the torque of the command it answers;
-            // the drive's torque actual 0x6077 lags an exchange behind it.
-            self.measured.tau_applied[j] =
-                s.effort_from_torque_actual(self.outputs[i].target_torque);
             let Ok(state) = Statusword(inp.statusword).state() else {
                 first.get_or_insert(Fault::joint(
                     j,
