@@ -6,7 +6,7 @@
 //! | `on_configure` | [`Bus::bring_up`]: identities checked, SDO configuration, OP |
 //! | `on_activate` | every axis walked to Operation enabled by [`Axis`], target torque 0 until enabled |
 //! | `write` | target torque 0x6071 per axis from the joint torque ([`crate::scaling`]) |
-//! | `read` | the cycle's one exchange; position 0x6064, velocity 0x606C, torque 0x6077 to joint SI; a drive fault (statusword bit 3) as `Fault::joint(joint, 0x603F)` |
+//! | `read` | the cycle's one exchange; position 0x6064, velocity 0x606C to joint SI, `tau_applied` the target torque 0x6071 sent in it (clamped, quantised); a drive fault (statusword bit 3) as `Fault::joint(joint, 0x603F)` |
 //! | `on_deactivate` | every axis walked to Switch on disabled (Disable operation first) |
 //! | `on_error` | the other axes to Quick stop |
 //! | `on_reset` | a drive fault: one rising edge of controlword bit 7 per faulted axis; a bus fault: the bus brought up again |
@@ -187,6 +187,14 @@ impl EthercatBackend {
                 out.target_torque = 0;
             }
             bus.set_outputs(i, out);
+            // The torque applied is the one this exchange commands, as the drive
+            // receives it (target torque 0x6071 after the clamp and the per-mille
+            // quantisation), so a state names the torque of the command it answers
+            // (also when the exchange is lost: the frame may have reached the drive);
+            // the drive's torque actual 0x6077 lags an exchange behind it.
+            self.measured.tau_applied[self.joint_of_axis[i]] = self.file.axes[i]
+                .scaling
+                .effort_from_torque_actual(out.target_torque);
         }
         let t0 = Instant::now();
         let r = bus.exchange();
@@ -244,7 +252,6 @@ impl EthercatBackend {
             let s = &self.file.axes[i].scaling;
             self.measured.q[j] = s.position_from_counts(inp.position);
             self.measured.qd[j] = s.velocity_from_counts(inp.velocity);
-            self.measured.tau_applied[j] = s.effort_from_torque_actual(inp.torque);
             let Ok(state) = Statusword(inp.statusword).state() else {
                 first.get_or_insert(Fault::joint(
                     j,

@@ -230,8 +230,8 @@ impl AxisScaling {
         }
     }
 
-    /// Joint effort (N·m or N) from a torque actual (0x6077, per mille of rated motor
-    /// torque).
+    /// Joint effort (N·m or N) from a torque in per mille of rated motor torque (torque
+    /// actual 0x6077, or a target torque 0x6071 as sent).
     pub fn effort_from_torque_actual(&self, per_mille: i16) -> f64 {
         f64::from(per_mille) * self.effort_per_per_mille
     }

@@ -115,10 +115,18 @@ fn seed_arm_reaches_op_enables_and_a_torque_moves_the_joint() {
     );
     assert!(m.qd[0] > 0.0);
     assert!(d0.torque_nm > 0.0, "the drive applies torque");
-    assert!(
-        (m.tau_applied[0] - 0.5).abs() < 0.1,
-        "tau applied {}",
-        m.tau_applied[0]
+    // The torque applied is the one commanded, as the drive receives it: 0x6071 after
+    // the per-mille quantisation, in the same cycle (not the torque actual a cycle late).
+    let s = &drive_file(6, 1.27).axes[0].scaling;
+    let sent = s.effort_from_torque_actual(s.effort_to_target_torque(0.5).per_mille);
+    assert_eq!(m.tau_applied[0], sent, "tau applied");
+    assert!((sent - 0.5).abs() < 0.1, "tau applied {sent}");
+    tau[0] = -0.3;
+    let m = cycle(&mut b, &tau).expect("cycle");
+    assert_eq!(
+        m.tau_applied[0],
+        s.effort_from_torque_actual(s.effort_to_target_torque(-0.3).per_mille),
+        "the command of this cycle"
     );
     let n = (after.count - before.count) as f64;
     println!(

@@ -92,6 +92,8 @@ pub struct ActuatorCore<B: ActuatorBackend> {
     /// After a stall: the first state published after it; commands answering an older
     /// state are not followed. `None` when no stall is pending.
     resync_state_seq: Option<u64>,
+    /// Wall time spent inside lifecycle hooks, not yet taken by the stage.
+    hook_ns: u64,
     /// Counters for the status.
     pub counters: Counters,
     /// Largest |q_measured − q_desired| per joint (see [`ActuatorCore::step`]).
@@ -128,6 +130,8 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         }
         let mut hw = Lifecycle::new(backend);
         hw.configure()?;
+        // Configuring is before the cycle starts: nothing to restart.
+        hw.take_hook_ns();
         let period_s = 1.0 / cfg.rate_hz;
         let ramp_steps = (cfg.watchdog.ramp_ms * 1e-3 / period_s).ceil() as u32;
         let last_measured = match hw.read(0) {
@@ -171,6 +175,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             hw_faults_counted: 0,
             last_step_ns: None,
             resync_state_seq: None,
+            hook_ns: 0,
             counters: Counters::default(),
             tracking_error_max: [0.0; MAX_JOINTS],
             peak_torque: [0.0; MAX_JOINTS],
@@ -304,6 +309,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                 {
                     self.safety.on_switch_on();
                 }
+                self.after_hooks();
                 self.count_backend_faults();
                 Ok(())
             }
@@ -353,6 +359,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         }
         self.count_backend_faults();
         if self.safety.latched() {
+            // Judged at `now_ns`, before the hook: its time is no silence of the pipeline.
             if self.watchdog.check(now_ns) == Freshness::Fresh {
                 self.safety.reset(&self.last_measured.q);
                 did = true;
@@ -360,7 +367,30 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                 self.counters.resets_refused += 1;
             }
         }
+        self.after_hooks();
         did
+    }
+
+    /// After a lifecycle hook the framework called (a reset that rebuilds a bus, an
+    /// activation that enables drives): the time spent inside it is neither a stall of
+    /// the cycle nor a silence of the pipeline, so the watchdog's and the stall
+    /// detection's clocks restart from its end with the ages they had at its start. The
+    /// held torque command keeps its own stamp: free-running, one older than `stale_ms`
+    /// is still never applied ([`Self::step`]). Returns the time spent (ns); the stage
+    /// drops the timer periods that elapsed in it (not replayed).
+    fn after_hooks(&mut self) -> u64 {
+        let took = self.hw.take_hook_ns();
+        self.watchdog.pause(took);
+        if let Some(t) = &mut self.last_step_ns {
+            *t = t.saturating_add(took);
+        }
+        self.hook_ns = self.hook_ns.saturating_add(took);
+        took
+    }
+
+    /// Wall time spent inside lifecycle hooks since the last call (ns).
+    pub fn take_hook_ns(&mut self) -> u64 {
+        std::mem::take(&mut self.hook_ns)
     }
 
     /// A restart: continues from `tau`, the torque the predecessor applied last (blended,
@@ -375,6 +405,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         if latch {
             if self.hw.state() == LifecycleState::Inactive {
                 let _ = self.hw.activate();
+                self.after_hooks();
                 self.count_backend_faults();
             }
             self.counters.faults += 1;

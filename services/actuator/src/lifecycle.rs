@@ -16,6 +16,8 @@ pub struct Lifecycle<B> {
     state: LifecycleState,
     fault: Option<Fault>,
     faults: u64,
+    /// Wall time spent inside hooks, not yet taken.
+    hook_ns: u64,
 }
 
 impl<B: ActuatorBackend> Lifecycle<B> {
@@ -26,6 +28,7 @@ impl<B: ActuatorBackend> Lifecycle<B> {
             state: LifecycleState::Unconfigured,
             fault: None,
             faults: 0,
+            hook_ns: 0,
         }
     }
 
@@ -37,6 +40,12 @@ impl<B: ActuatorBackend> Lifecycle<B> {
     /// The backend, mutable (tests, simulation set-up).
     pub fn backend_mut(&mut self) -> &mut B {
         &mut self.backend
+    }
+
+    /// Wall time spent inside the lifecycle hooks (configure, activate, deactivate,
+    /// reset) since the last call (ns).
+    pub fn take_hook_ns(&mut self) -> u64 {
+        std::mem::take(&mut self.hook_ns)
     }
 
     /// The current state.
@@ -70,7 +79,11 @@ impl<B: ActuatorBackend> Lifecycle<B> {
         if self.state != from {
             return false;
         }
-        match hook(&mut self.backend) {
+        let t0 = std::time::Instant::now();
+        let r = hook(&mut self.backend);
+        let took = u64::try_from(t0.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        self.hook_ns = self.hook_ns.saturating_add(took);
+        match r {
             Ok(()) => {
                 self.state = to;
                 true

@@ -330,7 +330,21 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
                     self.step(ports, now);
                 }
             }
+            // An activation that blocked: its periods are not replayed.
+            self.after_hooks(ports);
         });
+    }
+
+    /// After the framework called a lifecycle hook: the timer periods that elapsed inside
+    /// it are dropped, not replayed (the core restarted its clocks from the hook's end,
+    /// see `ActuatorCore::reset`). Returns whether a hook took longer than a period.
+    fn after_hooks(&mut self, ports: &Ports) -> bool {
+        if self.core.take_hook_ns() <= self.ticker.period_ns() {
+            return false;
+        }
+        self.ticker.on_expirations(ports.timer.read_expirations());
+        while self.ticker.next_tick().is_some() {}
+        true
     }
 
     fn take_commands(&mut self, ports: &Ports, cfg: &PipelineConfig, woken: bool) {
@@ -342,12 +356,22 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
                 && self.core.reset(monotonic_ns())
             {
                 tracing::info!("actuator: reset, following torque commands again");
-                // Lockstep: a torque taken while latched and not yet answered by a
-                // timer step is answered now, or the loop (which ticks on states)
-                // would wait for a state while this waits for a torque.
-                if cfg.lockstep && self.accepted != u64::MAX && self.accepted != self.answered {
+                let blocked = self.after_hooks(ports);
+                if !cfg.lockstep && blocked {
+                    // A fresh state now (as after activation), for the pipeline to
+                    // answer: the torque held from before the reset is older than the
+                    // reset took, and is not applied once older than `stale_ms`.
+                    self.step(ports, monotonic_ns());
+                } else if self.accepted != u64::MAX && self.accepted != self.answered {
+                    // Lockstep: a torque taken while latched and not yet answered by a
+                    // timer step is answered now, or the loop (which ticks on states)
+                    // would wait for a state while this waits for a torque. Otherwise
+                    // the last state's answer is still on its way (one state per torque:
+                    // another state now would run two loops).
                     self.step(ports, monotonic_ns());
                 }
+            } else {
+                self.after_hooks(ports);
             }
         });
     }

@@ -2,9 +2,14 @@
 //! state and its reset, with a fake clock.
 
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
+use microrobot_actuator::backend::{ActuatorBackend, Fault, Measured};
 use microrobot_actuator::{ActuatorConfig, ActuatorCore, Mode, SimArm, initial_q};
 use microrobot_messages::{Header, LifecycleState, TorqueCommand, state_flags, torque_flags};
+use microrobot_model::JointVector;
 use microrobot_model::Robot;
 use microrobot_runtime::config::PipelineConfig;
 
@@ -204,4 +209,119 @@ fn lockstep_has_no_stalls() {
     c.step(MS);
     assert_eq!(c.on_wake(10_000 * MS), None);
     assert!(!c.stalled());
+}
+
+/// The simulated arm behind a bus that can fail, and whose reset rebuilds the bus for
+/// longer than `fault_ms` (blocking, like a real master's).
+struct SlowResetArm {
+    sim: SimArm,
+    fail: Arc<AtomicBool>,
+}
+
+const RESET_BLOCKS: Duration = Duration::from_millis(250);
+
+impl ActuatorBackend for SlowResetArm {
+    fn dof(&self) -> usize {
+        self.sim.dof()
+    }
+    fn on_reset(&mut self) -> Result<(), Fault> {
+        std::thread::sleep(RESET_BLOCKS);
+        self.fail.store(false, Ordering::Relaxed);
+        Ok(())
+    }
+    fn write(&mut self, now_ns: u64, period_s: f64, tau: &JointVector) -> Result<(), Fault> {
+        if self.fail.load(Ordering::Relaxed) {
+            return Err(Fault::drive(0x8130, "bus lost"));
+        }
+        self.sim.write(now_ns, period_s, tau)
+    }
+    fn read(&mut self, now_ns: u64) -> Result<Measured, Fault> {
+        self.sim.read(now_ns)
+    }
+}
+
+/// A bus fault, then a reset whose hook blocks for longer than `fault_ms`: the time
+/// inside the hook is neither a stall nor a silence, so the arm follows the next fresh
+/// command without re-latching, while a command older than `stale_ms` is not applied.
+fn reset_blocking_longer_than_fault_ms_recovers(lockstep: bool) {
+    let cfg = PipelineConfig {
+        robot: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml"),
+        lockstep,
+        ..Default::default()
+    };
+    assert!(RESET_BLOCKS.as_nanos() as u64 > cfg.watchdog.fault_ns());
+    let robot = Robot::from_file(&cfg.robot).unwrap();
+    let fail = Arc::new(AtomicBool::new(false));
+    let a = ActuatorConfig::default();
+    let arm = SlowResetArm {
+        sim: SimArm::new(&robot, &a.sim, &initial_q(&robot, &a.sim)),
+        fail: fail.clone(),
+    };
+    let mut c = ActuatorCore::new(arm, &robot, &cfg, &a).unwrap();
+    let t0 = 1000 * MS;
+    let mut t = t0;
+    for seq in 1..=5 {
+        assert_eq!(c.on_wake(t), None);
+        c.accept_torque(&torque(seq, t), 1, t).unwrap();
+        c.check_watchdog(t);
+        c.step(t);
+        t += MS;
+    }
+    assert_eq!(c.lifecycle(), LifecycleState::Active);
+    // The bus fails; the pipeline keeps sending.
+    fail.store(true, Ordering::Relaxed);
+    c.accept_torque(&torque(6, t), 1, t).unwrap();
+    c.step(t);
+    assert_eq!(c.lifecycle(), LifecycleState::Fault);
+    t += MS;
+    c.accept_torque(&torque(7, t), 1, t).unwrap();
+    // The reset blocks: the fake clock moves on by what it really took.
+    let start = std::time::Instant::now();
+    assert!(c.reset(t));
+    let took = start.elapsed().as_nanos() as u64;
+    assert!(took >= RESET_BLOCKS.as_nanos() as u64);
+    t += took;
+    assert_eq!(c.on_wake(t), None, "the blocking reset is no stall");
+    c.check_watchdog(t);
+    assert!(
+        !c.safe_state_latched(),
+        "the watchdog restarted from the hook's end"
+    );
+    let s = c.step(t);
+    assert_eq!(
+        s.flags & (state_flags::SAFE_STATE | state_flags::STALLED),
+        0
+    );
+    if !lockstep {
+        // Free-running, the torque from before the reset is too old to apply.
+        assert_ne!(s.flags & state_flags::COMMAND_STALE, 0);
+    }
+    assert_eq!(c.counters.stalls, 0);
+    assert_eq!(c.counters.faults, 1, "the bus fault only: no re-latch");
+    // The pipeline answers that state: followed again, drives back on.
+    t += MS;
+    c.accept_torque(&answering(8, t, s.header.seq), 1, t)
+        .unwrap();
+    c.check_watchdog(t);
+    let s = c.step(t);
+    assert_eq!(c.lifecycle(), LifecycleState::Active);
+    assert_eq!(
+        s.flags & (state_flags::SAFE_STATE | state_flags::STALLED | state_flags::COMMAND_STALE),
+        0
+    );
+    assert_eq!(s.torque_seq, 8);
+    // Silence after it is still judged from then on: latched after fault_ms.
+    t += cfg.watchdog.fault_ns() + MS;
+    c.check_watchdog(t);
+    assert!(c.safe_state_latched());
+}
+
+#[test]
+fn a_reset_blocking_longer_than_fault_ms_recovers_free_running() {
+    reset_blocking_longer_than_fault_ms_recovers(false);
+}
+
+#[test]
+fn a_reset_blocking_longer_than_fault_ms_recovers_in_lockstep() {
+    reset_blocking_longer_than_fault_ms_recovers(true);
 }

@@ -40,6 +40,14 @@ impl Watchdog {
         self.last_ns = Some(now_ns);
     }
 
+    /// Time that does not count (`ns` spent in a blocking call the owner made itself):
+    /// the last input's age at the end of it is its age at the start.
+    pub fn pause(&mut self, ns: u64) {
+        if let Some(t) = &mut self.last_ns {
+            *t = t.saturating_add(ns);
+        }
+    }
+
     /// Forget the last input (back to [`Freshness::Waiting`]).
     pub fn disarm(&mut self) {
         self.last_ns = None;

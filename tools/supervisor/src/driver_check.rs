@@ -46,6 +46,16 @@ pub struct DriverCheckArgs {
     /// Check the lockstep contract (one state per torque) instead of free-running.
     #[arg(long)]
     pub lockstep: bool,
+    /// For drives that quantise torque: the step of the torque they receive, in N·m
+    /// (N for a prismatic joint), one for every joint or one per joint (`R1,R2,...`).
+    /// The `torque applied` clause then passes a state whose `tau_applied` is within
+    /// half a step of the torque it names; without it, within 1e-6.
+    #[arg(
+        long = "torque-resolution-nm",
+        value_name = "R[,R2,...]",
+        value_delimiter = ','
+    )]
+    pub torque_resolution_nm: Vec<f64>,
     /// Also write the clauses as JSON to this file.
     #[arg(long = "summary-json", visible_alias = "json", value_name = "FILE")]
     pub json: Option<PathBuf>,
@@ -132,6 +142,8 @@ struct Rig {
     statuses: Vec<ServiceStatus>,
     /// Where the hold law holds the arm.
     hold_q: JointVector,
+    /// Per joint, the drives' torque step (`--torque-resolution-nm`), if they quantise.
+    torque_resolution: Option<JointVector>,
     tick: u64,
     command_seq: u64,
 }
@@ -174,6 +186,7 @@ impl Rig {
             states: Vec::new(),
             statuses: Vec::new(),
             hold_q: JointVector::zeros(),
+            torque_resolution: None,
             tick: 0,
             command_seq: 0,
         })
@@ -487,6 +500,8 @@ pub fn check(args: &DriverCheckArgs) -> Result<Verdict, Fail> {
     let robot = Robot::from_file(&cfg.robot)
         .map_err(|e| anyhow::anyhow!("bad config: robot {}: {e}", cfg.robot.display()))
         .map_err(bad_config)?;
+    let torque_resolution = torque_resolution(&args.torque_resolution_nm, robot.dof())
+        .map_err(|e| bad_config(anyhow::anyhow!("--torque-resolution-nm: {e}")))?;
     let _lock = instance::lock_instance(&cfg.instance).map_err(failure)?;
     instance::clean_leftovers(&cfg.instance);
     let run_dir = instance::run_dir(&cfg.instance).map_err(failure)?;
@@ -495,6 +510,7 @@ pub fn check(args: &DriverCheckArgs) -> Result<Verdict, Fail> {
     crate::driver_info::write(&cfg, &robot, &resolved).map_err(failure)?;
 
     let mut rig = Rig::open(&cfg, robot).map_err(failure)?;
+    rig.torque_resolution = torque_resolution;
     let mut driver =
         Service::spawn(launch(args, &cfg, &resolved, &run_dir, None)).map_err(failure)?;
     let result = script(&mut rig, &mut driver, &cfg, args, &resolved, &run_dir);
@@ -507,6 +523,28 @@ pub fn check(args: &DriverCheckArgs) -> Result<Verdict, Fail> {
         pass: clauses.iter().all(|c| c.pass),
         clauses,
     })
+}
+
+/// `--torque-resolution-nm`: none, one step for every joint, or one per joint; each
+/// finite and positive.
+fn torque_resolution(r: &[f64], dof: usize) -> Result<Option<JointVector>, String> {
+    if r.is_empty() {
+        return Ok(None);
+    }
+    if r.len() != 1 && r.len() != dof {
+        return Err(format!(
+            "{} values for {dof} joints (give one, or one per joint)",
+            r.len()
+        ));
+    }
+    if let Some(bad) = r.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
+        return Err(format!("{bad} is not a positive step"));
+    }
+    let mut out = JointVector::zeros();
+    for i in 0..dof {
+        out[i] = if r.len() == 1 { r[0] } else { r[i] };
+    }
+    Ok(Some(out))
 }
 
 /// The script: each step appends its clauses; a step whose precondition failed ends it.
@@ -811,6 +849,12 @@ fn check_torque_phase(rig: &Rig, from: usize, t0: u64, t1: u64, unanswered: u32)
     let mut applied_bad = 0;
     let mut inactive = 0;
     let mut worst_q: f64 = 0.0;
+    // Equal to 1e-6, or within half a step of a drive that quantises torque (and the
+    // rounding error of the scaling factors).
+    let tolerance = |i: usize, tau: f64| match &rig.torque_resolution {
+        Some(r) => 0.5 * r[i] * (1.0 + 1e-9) + 1e-12,
+        None => 1e-6 * (1.0 + tau.abs()),
+    };
     for s in states {
         let st = &s.state;
         if st.torque_seq == u64::MAX {
@@ -829,8 +873,7 @@ fn check_torque_phase(rig: &Rig, from: usize, t0: u64, t1: u64, unanswered: u32)
                     | state_flags::COMMAND_STALE
                     | state_flags::SAFE_STATE)
                 == 0
-            && (0..dof)
-                .any(|i| (st.tau_applied[i] - t.tau[i]).abs() > 1e-6 * (1.0 + t.tau[i].abs()))
+            && (0..dof).any(|i| (st.tau_applied[i] - t.tau[i]).abs() > tolerance(i, t.tau[i]))
         {
             applied_bad += 1;
         }
@@ -843,11 +886,18 @@ fn check_torque_phase(rig: &Rig, from: usize, t0: u64, t1: u64, unanswered: u32)
         pass: inactive == 0 && n > 0,
         seen: format!("{inactive} states after the first torque not active"),
     });
+    let within = match &rig.torque_resolution {
+        Some(r) => format!(
+            "by more than half the torque resolution ({:.4?} N·m / 2)",
+            &r.as_slice()[..dof]
+        ),
+        None => "by more than 1e-6".to_string(),
+    };
     out.push(Clause {
         name: "torque applied",
         pass: applied_bad == 0 && n > 0,
         seen: format!(
-            "{applied_bad} states whose tau_applied differs from the torque they name (neither saturated nor slope-limited); the hold law kept q within {worst_q:.2e} of its start"
+            "{applied_bad} states whose tau_applied differs from the torque they name {within} (neither saturated nor slope-limited); the hold law kept q within {worst_q:.2e} of its start"
         ),
     });
     out
