@@ -110,15 +110,23 @@ impl HopStats {
     /// The end-to-end row of the budget from the actuator's status (its `latency`,
     /// with the exact mean from `latency_sum_ns`).
     pub fn end_to_end(actuator: &ServiceStatus) -> Self {
-        let l = &actuator.latency;
-        let us = |ns: u64| ns as f64 / 1000.0;
+        Self::from(&Percentiles::with_sum(
+            &actuator.latency,
+            actuator.latency_sum_ns,
+        ))
+    }
+}
+
+impl From<&Percentiles> for HopStats {
+    /// The budget's row of a latency's percentiles (mean 0 where no sum was kept).
+    fn from(p: &Percentiles) -> Self {
         Self {
-            count: l.count,
-            p50: us(l.p50_ns),
-            p99: us(l.p99_ns),
-            p999: us(l.p999_ns),
-            max: us(l.max_ns),
-            mean: mean_us(l.count, actuator.latency_sum_ns).unwrap_or(0.0),
+            count: p.count,
+            p50: p.p50,
+            p99: p.p99,
+            p999: p.p999,
+            max: p.max,
+            mean: p.mean.unwrap_or(0.0),
         }
     }
 }
@@ -557,15 +565,7 @@ impl Summary {
     fn render_hops(&self, s: &mut String) {
         let h = &self.hops;
         let e = &self.e2e_latency_us;
-        let e2e = HopStats {
-            count: e.count,
-            p50: e.p50,
-            p99: e.p99,
-            p999: e.p999,
-            max: e.max,
-            mean: e.mean.unwrap_or(0.0),
-        };
-        h.render(&e2e, s);
+        h.render(&HopStats::from(e), s);
         let untaken = h.dynamics_compute_us.count.saturating_sub(e.count);
         if untaken > 0 {
             let _ = writeln!(
