@@ -80,13 +80,15 @@ pub struct BadConfig(pub String);
 /// ([`PipelineConfig::service_realtime`]). Everything before — loading the model, opening
 /// ports, locking memory, waiting for the first state — ran as an ordinary task, so a
 /// restarting service never holds up the running pipeline's real-time stages on their CPU.
-pub fn enter_cycle(cfg: &PipelineConfig) {
+/// Returns what runs the cycle's status work below its priority ([`rt::Housekeeping`]).
+pub fn enter_cycle(cfg: &PipelineConfig) -> rt::Housekeeping {
     let mut g = rt::RtGuard::default();
     rt::enter_cycle(&cfg.service_realtime(), &mut g);
     tracing::info!(
         "entering the cycle: real-time settings applied: {:?}",
         g.applied
     );
+    rt::Housekeeping::new(g.fifo_priority)
 }
 
 /// The `main` of a service binary (`microrobot-planner`, `microrobot-dynamics`,

@@ -17,6 +17,8 @@ pub struct RtGuard {
     pub applied: Vec<&'static str>,
     /// Settings that fell back (each was warned about once).
     pub fallbacks: Vec<&'static str>,
+    /// The SCHED_FIFO priority the cycle runs at, when it was applied.
+    pub fifo_priority: Option<i32>,
 }
 
 impl RtGuard {
@@ -128,6 +130,9 @@ pub fn enter_cycle(cfg: &RealtimeConfig, g: &mut RtGuard) {
         };
         // SAFETY: `param` is a valid sched_param; pid 0 is the calling thread.
         let r = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+        if r == 0 {
+            g.fifo_priority = Some(param.sched_priority);
+        }
         note(
             if r == 0 {
                 Ok(())
@@ -138,6 +143,61 @@ pub fn enter_cycle(cfg: &RealtimeConfig, g: &mut RtGuard) {
             g,
         );
     }
+}
+
+/// Housekeeping a cycle does after its real work (its status: percentiles, CPU time,
+/// memory, the publish) runs one step below the cycle's SCHED_FIFO priority: a stage
+/// that this process's message just woke on the same CPU (equal priority, so it would
+/// otherwise wait for this one to block) runs first, and the housekeeping takes the
+/// CPU when the pipeline's hops are done. Two `sched_setscheduler` calls per use; a
+/// cycle that is not SCHED_FIFO runs the work as it is.
+#[derive(Debug)]
+pub struct Housekeeping {
+    fifo_priority: Option<i32>,
+    /// A priority restore failed once (warned once; later failures are silent).
+    restore_failed: bool,
+}
+
+impl Housekeeping {
+    /// For a cycle running at `fifo_priority` (None: not real-time).
+    pub fn new(fifo_priority: Option<i32>) -> Self {
+        Self {
+            fifo_priority,
+            restore_failed: false,
+        }
+    }
+
+    /// Runs `work` below the cycle's priority (SCHED_FIFO one lower, or SCHED_OTHER
+    /// for priority 1) and restores the cycle's priority after it.
+    pub fn run<R>(&mut self, work: impl FnOnce() -> R) -> R {
+        let Some(p) = self.fifo_priority else {
+            return work();
+        };
+        let (policy, below) = if p > 1 {
+            (libc::SCHED_FIFO, p - 1)
+        } else {
+            (libc::SCHED_OTHER, 0)
+        };
+        let lowered = set_scheduler(policy, below);
+        let out = work();
+        if lowered && !set_scheduler(libc::SCHED_FIFO, p) && !self.restore_failed {
+            self.restore_failed = true;
+            tracing::warn!(
+                "could not restore SCHED_FIFO priority {p} after the status work: {}",
+                errno()
+            );
+        }
+        out
+    }
+}
+
+/// Sets the calling thread's policy and priority; true on success.
+fn set_scheduler(policy: i32, priority: i32) -> bool {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: `param` is a valid sched_param; pid 0 is the calling thread.
+    unsafe { libc::sched_setscheduler(0, policy, &param) == 0 }
 }
 
 fn set_affinity(cpus: &[usize]) -> Result<(), String> {

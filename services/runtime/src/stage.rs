@@ -134,7 +134,7 @@ pub fn serve<S: Stage>(
     status_port.publish(monotonic_ns(), &mut status);
 
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
-    crate::enter_cycle(cfg);
+    let mut housekeeping = crate::enter_cycle(cfg);
     while !shutdown.is_requested() {
         let ready = reactor.wait().context("epoll_wait")?;
         if ready.contains(on_stop) || shutdown.is_requested() {
@@ -150,8 +150,11 @@ pub fn serve<S: Stage>(
         let asked = cycle.publish_status;
         let now = monotonic_ns();
         if asked || status_port.due(now) {
-            stage.report(&mut status);
-            status_port.publish(now, &mut status);
+            // Below the cycle's priority: the stage this wake-up's message woke goes first.
+            housekeeping.run(|| {
+                stage.report(&mut status);
+                status_port.publish(now, &mut status);
+            });
         }
     }
     stage.finish(&ports);
