@@ -224,3 +224,45 @@ fn set_affinity(cpus: &[usize]) -> Result<(), String> {
         Err(format!("sched_setaffinity: {}", errno()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The calling thread's (policy, priority).
+    fn scheduling() -> (i32, i32) {
+        // SAFETY: pid 0 is the calling thread; `p` is a valid, writable sched_param.
+        let policy = unsafe { libc::sched_getscheduler(0) };
+        let mut p = libc::sched_param { sched_priority: 0 };
+        // SAFETY: as above.
+        unsafe { libc::sched_getparam(0, &mut p) };
+        (policy, p.sched_priority)
+    }
+
+    #[test]
+    fn housekeeping_runs_one_step_below_the_cycle_and_restores_it() {
+        // Its own thread: the test harness's threads keep their scheduling.
+        std::thread::spawn(|| {
+            let before = scheduling();
+            assert_eq!(Housekeeping::new(None).run(scheduling), before);
+            if set_scheduler(libc::SCHED_FIFO, 10) {
+                let mut h = Housekeeping::new(Some(10));
+                assert_eq!(h.run(scheduling), (libc::SCHED_FIFO, 9));
+                assert_eq!(scheduling(), (libc::SCHED_FIFO, 10));
+                assert!(set_scheduler(libc::SCHED_FIFO, 1));
+                let mut h = Housekeeping::new(Some(1));
+                assert_eq!(h.run(scheduling), (libc::SCHED_OTHER, 0));
+                assert_eq!(scheduling(), (libc::SCHED_FIFO, 1));
+                assert!(!h.restore_failed);
+            } else {
+                // Not permitted here (no CAP_SYS_NICE or RLIMIT_RTPRIO): the lowering
+                // fails too, the work runs as it is and nothing is changed.
+                let mut h = Housekeeping::new(Some(10));
+                assert_eq!(h.run(scheduling), before);
+                assert_eq!(scheduling(), before);
+            }
+        })
+        .join()
+        .expect("the housekeeping thread");
+    }
+}
