@@ -197,13 +197,18 @@ fn latched(states: &[JointState], inject_ns: u64, reset_ns: Option<u64>, stop_ns
         .filter(|s| s.header.stamp_ns < until && !flagged(s))
         .count();
     assert_eq!(unlatched, 0, "latched until the reset");
-    assert!(
-        states[..first]
-            .iter()
-            .filter(|s| s.header.stamp_ns < inject_ns)
-            .all(|s| !flagged(s)),
-        "not latched before the fault"
-    );
+    if let Some(s) = states[..first]
+        .iter()
+        .find(|s| s.header.stamp_ns < inject_ns && flagged(s))
+    {
+        panic!(
+            "not latched before the fault: state seq {} {:.1} ms before it, lifecycle {}, flags {:#x}",
+            s.header.seq,
+            (inject_ns - s.header.stamp_ns) as f64 * 1e-6,
+            s.lifecycle,
+            s.flags
+        );
+    }
     if reset_ns.is_some() {
         let last = states
             .iter()

@@ -9,6 +9,9 @@ use microrobot_model::JointVector;
 
 use crate::backend::{ActuatorBackend, Fault, Measured};
 
+/// One of a backend's lifecycle hooks.
+type HookFn<B> = fn(&mut B) -> Result<(), Fault>;
+
 /// A backend and its lifecycle state.
 #[derive(Debug, Clone)]
 pub struct Lifecycle<B> {
@@ -74,7 +77,7 @@ impl<B: ActuatorBackend> Lifecycle<B> {
         &mut self,
         from: LifecycleState,
         to: LifecycleState,
-        (name, hook): (LifecycleHook, fn(&mut B) -> Result<(), Fault>),
+        (name, hook): (LifecycleHook, HookFn<B>),
         announce: &mut dyn FnMut(LifecycleHook),
     ) -> bool {
         if self.state != from {
