@@ -197,9 +197,13 @@ fn latched(states: &[JointState], inject_ns: u64, reset_ns: Option<u64>, stop_ns
         .filter(|s| s.header.stamp_ns < until && !flagged(s))
         .count();
     assert_eq!(unlatched, 0, "latched until the reset");
+    // A state's stamp is its step's start; the step's bus exchange, which may already
+    // see the fault, ends after it (within the period): a state stamped less than a
+    // period before the injection may show it.
+    let period_ns = (PERIOD_S * 1e9) as u64;
     if let Some(s) = states[..first]
         .iter()
-        .find(|s| s.header.stamp_ns < inject_ns && flagged(s))
+        .find(|s| s.header.stamp_ns + period_ns <= inject_ns && flagged(s))
     {
         panic!(
             "not latched before the fault: state seq {} {:.1} ms before it, lifecycle {}, flags {:#x}",
