@@ -98,7 +98,8 @@ class ServiceStatus(ctypes.Structure):
         ("reserved", c_u32), ("refusal_joint", c_u32), ("refusal_quantity", c_u32),
         ("refusal_value", c_f64), ("refusal_min", c_f64), ("refusal_max", c_f64),
         ("command_verdicts", CommandVerdict * 16), ("fault_code", c_u32), ("fault_joint", c_u32),
-        ("latency_sum_ns", c_u64), ("hops", HopLatency * 2),
+        ("latency_sum_ns", c_u64), ("hops", HopLatency * 2), ("hook", c_u32),
+        ("hook_budget_ms", c_u32),
     ]
 
     @staticmethod
@@ -116,12 +117,13 @@ def _check_layout():
                            "lifecycle": 236, "flags": 240, "reserved": 244}),
         MotionCommand: (112, {"kind": 16, "profile": 20, "space": 24, "dof": 28, "target": 32,
                               "duration_s": 96, "limit_scale": 104}),
-        ServiceStatus: (1016, {"cycles": 32, "motion_time_s": 112, "rss_kib": 128, "latency": 136,
+        ServiceStatus: (1024, {"cycles": 32, "motion_time_s": 112, "rss_kib": 128, "latency": 136,
                               "tracking_error_max": 184, "peak_torque": 248, "estops": 312,
                               "last_command_refusal": 336, "last_input_refusal": 340,
                               "activity": 352, "refusal_joint": 360, "refusal_value": 368,
                               "command_verdicts": 392, "fault_code": 904, "fault_joint": 908,
-                              "latency_sum_ns": 912, "hops": 920}),
+                              "latency_sum_ns": 912, "hops": 920, "hook": 1016,
+                              "hook_budget_ms": 1020}),
     }
     for t, (size, offs) in expect.items():
         assert ctypes.sizeof(t) == size, (t.__name__, ctypes.sizeof(t), size)

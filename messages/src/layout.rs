@@ -139,7 +139,9 @@ pub fn payload_layouts() -> Vec<Layout> {
             fault_code,
             fault_joint,
             latency_sum_ns,
-            hops
+            hops,
+            hook,
+            hook_budget_ms
         }),
         layout!(HopLatency {
             count,

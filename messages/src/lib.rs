@@ -24,9 +24,9 @@ pub use ports::{
     BusError, ServiceKind, Topic, open_event, open_publish_subscribe, service_name, topic,
 };
 pub use status::{
-    Activity, COMMAND_VERDICTS, CommandVerdict, HopLatency, LatencySummary, LifecycleState,
-    ProgramEnd, ProgramState, RefusalQuantity, RefusalReason, STATUS_HOPS, ServiceRole,
-    ServiceStatus, VerdictLookup,
+    Activity, COMMAND_VERDICTS, CommandVerdict, HopLatency, LatencySummary, LifecycleHook,
+    LifecycleState, ProgramEnd, ProgramState, RefusalQuantity, RefusalReason, STATUS_HOPS,
+    ServiceRole, ServiceStatus, VerdictLookup,
 };
 pub use stream::{
     Header, JointSetpoint, JointState, TorqueCommand, setpoint_flags, state_flags, torque_flags,

@@ -72,6 +72,49 @@ impl LifecycleState {
     }
 }
 
+/// A lifecycle hook of an actuator backend the framework is inside
+/// (`ServiceStatus::hook`): while one runs, the cycle is blocked and sends nothing, for
+/// up to the hook's declared budget (`ServiceStatus::hook_budget_ms`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum LifecycleHook {
+    /// Not inside a hook.
+    None = 0,
+    /// `on_configure`.
+    Configure = 1,
+    /// `on_activate`.
+    Activate = 2,
+    /// `on_deactivate`.
+    Deactivate = 3,
+    /// `on_reset`.
+    Reset = 4,
+}
+
+impl LifecycleHook {
+    /// Decodes the wire value, `None` for an unknown hook.
+    pub fn from_wire(v: u32) -> Option<Self> {
+        match v {
+            0 => Some(Self::None),
+            1 => Some(Self::Configure),
+            2 => Some(Self::Activate),
+            3 => Some(Self::Deactivate),
+            4 => Some(Self::Reset),
+            _ => None,
+        }
+    }
+
+    /// The hook's name, as in the backend trait and in verdicts (`on_reset`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Configure => "on_configure",
+            Self::Activate => "on_activate",
+            Self::Deactivate => "on_deactivate",
+            Self::Reset => "on_reset",
+        }
+    }
+}
+
 /// Why a service refused an input (`ServiceStatus::last_command_refusal`,
 /// `ServiceStatus::last_input_refusal`), so a tool can say what was wrong without
 /// reading the service's log.
@@ -534,6 +577,14 @@ pub struct ServiceStatus {
     /// state sent]`. The end-to-end `latency` of the actuator is the sum of the
     /// dynamics' two hops and its first.
     pub hops: [HopLatency; STATUS_HOPS],
+    /// Actuator: the lifecycle hook (a [`LifecycleHook`]) the framework entered just
+    /// before this status was sent and has not returned from yet; 0 = none. A status
+    /// with a hook is the last until the hook returns.
+    pub hook: u32,
+    /// Actuator: with `hook`, how long the hook may block the cycle (ms,
+    /// `actuator.hook_budget_ms`): the supervisor takes the process for hung only once
+    /// it has been silent for longer. 0 without a hook.
+    pub hook_budget_ms: u32,
 }
 
 impl ServiceStatus {

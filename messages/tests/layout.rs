@@ -60,7 +60,9 @@ fn status_layout_is_stable() {
     assert_eq!(size_of::<HopLatency>(), 48);
     assert_eq!(offset_of!(HopLatency, sum_ns), 8);
     assert_eq!(STATUS_HOPS, 2);
-    assert_eq!(size_of::<ServiceStatus>(), 1016);
+    assert_eq!(offset_of!(ServiceStatus, hook), 1016);
+    assert_eq!(offset_of!(ServiceStatus, hook_budget_ms), 1020);
+    assert_eq!(size_of::<ServiceStatus>(), 1024);
     assert_eq!(align_of::<ServiceStatus>(), 8);
 }
 

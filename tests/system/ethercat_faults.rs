@@ -8,19 +8,20 @@
 //! `microrobot send reset` recovers once the fault has cleared, or (killed driver,
 //! wrong identity) that the run ends with a verdict that says why.
 //!
-//! 250 Hz (bus cycle 4 ms) with the default stale_ms (50 ms): the reset after a bus
-//! fault blocks the actuator while the bus comes up again (~0.4 s), which the framework
-//! does not count as a stall. Free-running on the wall clock, as on hardware:
-//! in lockstep the loop is still lost after some resets, after a drive fault too (the
-//! actuator publishes a state no torque answers; see the driver's README). The wrong
-//! identity, refused before the cycle starts, runs in lockstep.
+//! 250 Hz (bus cycle 4 ms) with the default `stale_ms`, `fault_ms` and
+//! `supervisor.hung_ms`: the reset after a bus fault blocks the actuator while the bus
+//! comes up again (~0.4 s), which the framework does not count as a stall and announces
+//! in its status, so the supervisor gives it its budget (`actuator.hook_budget_ms`). The
+//! recoverable faults run free-running on the wall clock, as on hardware, and in
+//! lockstep; the killed driver free-running; the wrong identity, refused before the
+//! cycle starts, in lockstep. A reset blocking beyond its budget is caught as hung.
 
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use microrobot_messages::{
-    JointState, LifecycleState, ServiceRole, ServiceStatus, TorqueCommand, monotonic_ns,
-    state_flags,
+    JointState, LifecycleHook, LifecycleState, ServiceRole, ServiceStatus, TorqueCommand,
+    monotonic_ns, state_flags,
 };
 
 use crate::common::*;
@@ -57,14 +58,10 @@ fn start_case(test: &str, opts: RigOptions, lockstep: bool, inject: &[&str]) -> 
         &instance,
         lockstep,
         "",
-        // The default stale_ms. A reset blocks the actuator's loop, and so its status,
-        // while the bus comes up again (~0.4 s here, more on a loaded machine, then the
-        // activation): the supervisor's hang detection is set above that. fault_ms is
-        // raised: after a reset the pipeline sent no torque for ~0.2 s in about 1 run
-        // in 5 (the actuator refusing none; see the driver's README).
-        &format!(
-            "[watchdog]\nramp_ms = {RAMP_MS}\nfault_ms = 1000\n\n[supervisor]\nhung_ms = 3000\n"
-        ),
+        // The defaults of stale_ms, fault_ms and supervisor.hung_ms: a reset blocks the
+        // actuator's loop while the bus comes up again (~0.4 s here, then the
+        // activation); it says so in its status first (`hook`, `hook_budget_ms`).
+        &format!("[watchdog]\nramp_ms = {RAMP_MS}\n"),
     );
     let rec = if lockstep {
         Recorder::start_spinning(&instance)
@@ -103,8 +100,15 @@ fn fault_reported(c: &Case, code: u32, joint: u32) -> ServiceStatus {
         ServiceRole::Actuator,
         &format!("fault code {code:#x}"),
         20.0,
-        |s| s.fault_code == code && s.stamp_ns > c.inject_ns,
+        |s| s.fault_code != 0 && s.stamp_ns > c.inject_ns,
     );
+    if st.fault_code != code {
+        let log = run(&["logs", "actuator", "--instance", &c.instance], 30.0);
+        panic!(
+            "fault code {:#x} (joint {}) in the status, not {code:#x}; actuator log:\n{}",
+            st.fault_code, st.fault_joint, log.stdout
+        );
+    }
     assert_eq!(st.fault_joint, joint, "fault axis in the status: {st:?}");
     assert!(st.faults >= 1, "{st:?}");
     let log = run(&["logs", "actuator", "--instance", &c.instance], 30.0);
@@ -193,13 +197,22 @@ fn latched(states: &[JointState], inject_ns: u64, reset_ns: Option<u64>, stop_ns
         .filter(|s| s.header.stamp_ns < until && !flagged(s))
         .count();
     assert_eq!(unlatched, 0, "latched until the reset");
-    assert!(
-        states[..first]
-            .iter()
-            .filter(|s| s.header.stamp_ns < inject_ns)
-            .all(|s| !flagged(s)),
-        "not latched before the fault"
-    );
+    // A state's stamp is its step's start; the step's bus exchange, which may already
+    // see the fault, ends after it (within the period): a state stamped less than a
+    // period before the injection may show it.
+    let period_ns = (PERIOD_S * 1e9) as u64;
+    if let Some(s) = states[..first]
+        .iter()
+        .find(|s| s.header.stamp_ns + period_ns <= inject_ns && flagged(s))
+    {
+        panic!(
+            "not latched before the fault: state seq {} {:.1} ms before it, lifecycle {}, flags {:#x}",
+            s.header.seq,
+            (inject_ns - s.header.stamp_ns) as f64 * 1e-6,
+            s.lifecycle,
+            s.flags
+        );
+    }
     if reset_ns.is_some() {
         let last = states
             .iter()
@@ -316,10 +329,23 @@ fn drives_enabled(d: &[DriveStatus]) -> bool {
     d.iter().all(|d| d.state == "Operation enabled")
 }
 
+/// How a case's pipeline is clocked.
+#[derive(Clone, Copy, PartialEq)]
+enum Clock {
+    /// Free-running on the wall clock, as on hardware.
+    FreeRunning,
+    /// Lockstep: one plant step per torque command, one exchange per step.
+    Lockstep,
+}
+
 /// Runs a recoverable fault case to the end.
-fn recoverable(test: &str, inject: &[&str], code: u32, joint: u32, clear: &[&str]) {
+fn recoverable(test: &str, clock: Clock, inject: &[&str], code: u32, joint: u32, clear: &[&str]) {
     let t0 = Instant::now();
-    let Some(mut c) = start_case(test, RigOptions::free_running(4000), false, inject) else {
+    let (opts, lockstep) = match clock {
+        Clock::FreeRunning => (RigOptions::free_running(4000), false),
+        Clock::Lockstep => (RigOptions::lockstep(), true),
+    };
+    let Some(mut c) = start_case(test, opts, lockstep, inject) else {
         return;
     };
     fault_reported(&c, code, joint);
@@ -345,44 +371,63 @@ fn recoverable(test: &str, inject: &[&str], code: u32, joint: u32, clear: &[&str
 
 #[test]
 fn ethercat_drive_fault_latches_names_axis_and_code_and_a_reset_recovers() {
-    // Drive 2 (joint 3) reports overcurrent (0x2310) in 0x603F.
-    recoverable(
-        "ecat-drive-fault",
-        &["drive-fault 2 0x2310"],
-        0x2310,
-        3,
-        &[],
-    );
+    drive_fault(Clock::FreeRunning, "ecat-drive-fault");
+}
+
+#[test]
+fn ethercat_drive_fault_latches_names_axis_and_code_and_a_reset_recovers_in_lockstep() {
+    drive_fault(Clock::Lockstep, "ecat-drive-fault-ls");
+}
+
+/// Drive 2 (joint 3) reports overcurrent (0x2310) in 0x603F.
+fn drive_fault(clock: Clock, test: &str) {
+    recoverable(test, clock, &["drive-fault 2 0x2310"], 0x2310, 3, &[]);
 }
 
 #[test]
 fn ethercat_drive_leaving_op_latches_names_axis_and_al_code_and_a_reset_recovers() {
-    // Drive 4 (joint 5) drops to SAFE-OP with AL status code 0x001B.
-    recoverable(
-        "ecat-drop-op",
-        &["drop-op 4 0x001B"],
-        LEFT_OP | 0x001B,
-        5,
-        &[],
-    );
+    drop_op(Clock::FreeRunning, "ecat-drop-op");
+}
+
+#[test]
+fn ethercat_drive_leaving_op_latches_names_axis_and_al_code_and_a_reset_recovers_in_lockstep() {
+    drop_op(Clock::Lockstep, "ecat-drop-op-ls");
+}
+
+/// Drive 4 (joint 5) drops to SAFE-OP with AL status code 0x001B.
+fn drop_op(clock: Clock, test: &str) {
+    recoverable(test, clock, &["drop-op 4 0x001B"], LEFT_OP | 0x001B, 5, &[]);
 }
 
 #[test]
 fn ethercat_lost_frames_beyond_max_lost_cycles_latch_and_a_reset_recovers() {
-    // 40 exchanges in a row unanswered: more than max_lost_cycles (25); the frames
-    // after them are answered again.
-    recoverable("ecat-lost-frames", &["lose 40"], BUS_LOST, 0, &[]);
+    lost_frames(Clock::FreeRunning, "ecat-lost-frames");
+}
+
+#[test]
+fn ethercat_lost_frames_beyond_max_lost_cycles_latch_and_a_reset_recovers_in_lockstep() {
+    lost_frames(Clock::Lockstep, "ecat-lost-frames-ls");
+}
+
+/// 40 exchanges in a row unanswered: more than max_lost_cycles (25); the frames after
+/// them are answered again.
+fn lost_frames(clock: Clock, test: &str) {
+    recoverable(test, clock, &["lose 40"], BUS_LOST, 0, &[]);
 }
 
 #[test]
 fn ethercat_link_down_latches_and_a_reset_after_link_up_recovers() {
-    recoverable(
-        "ecat-link-down",
-        &["link-down 0"],
-        BUS_LOST,
-        0,
-        &["link-up"],
-    );
+    link_down(Clock::FreeRunning, "ecat-link-down");
+}
+
+#[test]
+fn ethercat_link_down_latches_and_a_reset_after_link_up_recovers_in_lockstep() {
+    link_down(Clock::Lockstep, "ecat-link-down-ls");
+}
+
+/// The link goes down; the reset comes after it is up again.
+fn link_down(clock: Clock, test: &str) {
+    recoverable(test, clock, &["link-down 0"], BUS_LOST, 0, &["link-up"]);
 }
 
 /// The driver process killed (-9) while the drives are enabled and loaded: nothing
@@ -500,4 +545,72 @@ fn ethercat_wrong_identity_is_refused_before_enabling_and_the_run_fails_naming_i
         assert_eq!(d.state, "Switch on disabled", "nothing enabled: {}", d.line);
         assert_ne!(d.al_state, 8, "no drive in OP: {}", d.line);
     }
+}
+
+/// A reset that blocks inside `on_reset` for longer than its budget: after a link fault
+/// every frame of the bus's bring-up is delayed 90 ms (each still answered within the
+/// driver's PDU timeout), so bringing the bus up again takes many seconds, and
+/// `actuator.hook_budget_ms` is 1 s. The actuator says in its status that it entered
+/// `on_reset` with that budget; the supervisor waits the budget out (not
+/// `supervisor.hung_ms`, 500 ms), then kills it as hung, and the verdict names the hook
+/// and the budget.
+#[test]
+fn ethercat_a_reset_blocking_beyond_its_budget_is_caught_as_hung_naming_the_hook() {
+    let t0 = Instant::now();
+    let Some(mut rig) = Rig::start(RigOptions::free_running(4000)) else {
+        return;
+    };
+    let inst = instance("ecat-hook-hung");
+    let cfg = rig.pipeline_config(
+        &inst,
+        false,
+        "",
+        &format!("hook_budget_ms = 1000\n\n[watchdog]\nramp_ms = {RAMP_MS}\n"),
+    );
+    let rec = Recorder::start_statuses(&inst);
+    let proc = start_holding(&inst, &cfg, 120, None);
+    std::thread::sleep(Duration::from_millis(300));
+    let inject_ns = monotonic_ns();
+    rig.emulator("link-down 0");
+    wait_status(&inst, ServiceRole::Actuator, "the bus fault", 20.0, |s| {
+        s.fault_code == BUS_LOST && s.stamp_ns > inject_ns
+    });
+    rig.emulator("link-up");
+    rig.emulator("delay 90 100000");
+    let reset_at = Instant::now();
+    let r = send(&inst, &cfg, &["reset"]);
+    assert_eq!(r.code(), Some(0), "reset: {}", r.stderr);
+    let out = proc.finish(60.0);
+    let ended = reset_at.elapsed();
+    let statuses = rec.finish().statuses;
+    eprintln!(
+        "hook beyond its budget: run exit {:?} {:.2} s after the reset; {:.1} s; verdict:\n{}",
+        out.code(),
+        ended.as_secs_f64(),
+        t0.elapsed().as_secs_f64(),
+        out.stderr
+    );
+    assert_eq!(
+        out.code(),
+        Some(microrobot_runtime::exit_code::SERVICE_FAILED as i32),
+        "{}",
+        out.stderr
+    );
+    for s in [
+        "the actuator service hung",
+        "inside its on_reset hook",
+        "budget of 1000 ms",
+    ] {
+        assert!(out.stderr.contains(s), "`{s}` in:\n{}", out.stderr);
+    }
+    // The budget, not hung_ms, was waited for.
+    assert!(ended >= Duration::from_millis(1000), "{ended:?}");
+    assert!(
+        statuses
+            .iter()
+            .any(|s| s.role == ServiceRole::Actuator as u32
+                && s.hook == LifecycleHook::Reset as u32
+                && s.hook_budget_ms == 1000),
+        "a status announced the hook"
+    );
 }

@@ -140,7 +140,8 @@ class ServiceStatus(ctypes.Structure):
                 ("refusal_max", ctypes.c_double),
                 ("command_verdicts", CommandVerdict * COMMAND_VERDICTS),
                 ("fault_code", ctypes.c_uint32), ("fault_joint", ctypes.c_uint32),
-                ("latency_sum_ns", ctypes.c_uint64), ("hops", HopLatency * STATUS_HOPS)]
+                ("latency_sum_ns", ctypes.c_uint64), ("hops", HopLatency * STATUS_HOPS),
+                ("hook", ctypes.c_uint32), ("hook_budget_ms", ctypes.c_uint32)]
 
 
 @_named("MasterPose")

@@ -277,6 +277,10 @@ impl LostCycles {
     }
 }
 
+/// How long the AL status read after a SubDevice left OP may take at least (it names
+/// the reason in the fault's code); well below the pipeline's default `stale_ms`.
+pub const AL_STATUS_TIMEOUT: Duration = Duration::from_millis(20);
+
 /// The ethercrab timeouts used for bring-up (the cyclic exchange has its own deadline):
 /// a frame or an EEPROM access may take 100 ms, so that a scheduling hiccup of the
 /// host does not fail a bring-up.
@@ -690,7 +694,10 @@ impl Bus {
             Some(Ok(r)) => r,
         };
         if let Some(position) = resp.not_op {
-            let deadline = Instant::now() + self.exchange_timeout;
+            // The cycle fails anyway: the AL status code that says why is worth waiting
+            // a little longer than an exchange for (on a loaded host a read bounded by
+            // the exchange timeout lost it, and the fault said code 0).
+            let deadline = Instant::now() + self.exchange_timeout.max(AL_STATUS_TIMEOUT);
             return Err(CycleError::LeftOp {
                 position,
                 al_status_code: self.al_status_code(position, deadline, &waker),

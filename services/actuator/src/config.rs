@@ -89,8 +89,20 @@ pub struct ActuatorConfig {
     /// Minimum time for the applied torque to change by the joint's full effort limit
     /// (ms), a drive's torque slope; 0 = none.
     pub torque_slope_ms: f64,
+    /// How long one lifecycle hook of the backend (an `on_reset` that brings a bus up
+    /// again, an `on_activate` that enables drives) may block the cycle (ms): the
+    /// status says so before the hook, and the supervisor takes the actuator for hung
+    /// only once it has been silent for longer (see [`Self::hook_budget_s`]).
+    pub hook_budget_ms: f64,
     /// The simulated arm.
     pub sim: SimConfig,
+}
+
+impl ActuatorConfig {
+    /// `hook_budget_ms` in s.
+    pub fn hook_budget_s(&self) -> f64 {
+        self.hook_budget_ms * 1e-3
+    }
 }
 
 impl Default for ActuatorConfig {
@@ -102,6 +114,7 @@ impl Default for ActuatorConfig {
             hold_kp_per_s2: 400.0,
             hold_kd_per_s: 40.0,
             torque_slope_ms: 10.0,
+            hook_budget_ms: 5000.0,
             sim: SimConfig::default(),
         }
     }
@@ -120,6 +133,7 @@ impl OwnedSection for ActuatorConfig {
             "hold_kp_per_s2",
             "hold_kd_per_s",
             "torque_slope_ms",
+            "hook_budget_ms",
             "sim",
         ])?;
         let da = Self::default();
@@ -159,6 +173,11 @@ impl OwnedSection for ActuatorConfig {
             "torque_slope_ms",
             da.torque_slope_ms,
             Range::closed(0.0, 10_000.0),
+        )?;
+        let hook_budget_ms = t.number_in(
+            "hook_budget_ms",
+            da.hook_budget_ms,
+            Range::left_open(0.0, 600_000.0),
         )?;
         let s = t.section(
             "sim",
@@ -233,6 +252,7 @@ impl OwnedSection for ActuatorConfig {
             hold_kp_per_s2,
             hold_kd_per_s,
             torque_slope_ms,
+            hook_budget_ms,
             sim,
         })
     }
@@ -246,6 +266,7 @@ impl OwnedSection for ActuatorConfig {
         t.insert("hold_kp_per_s2".into(), self.hold_kp_per_s2.into());
         t.insert("hold_kd_per_s".into(), self.hold_kd_per_s.into());
         t.insert("torque_slope_ms".into(), self.torque_slope_ms.into());
+        t.insert("hook_budget_ms".into(), self.hook_budget_ms.into());
         let m = &self.sim;
         let mut s = Table::new();
         s.insert("mass_scale".into(), m.mass_scale.into());

@@ -32,7 +32,8 @@ mod serve;
 pub mod sim;
 
 use microrobot_messages::{
-    Header, JointState, LifecycleState, MAX_JOINTS, TorqueCommand, state_flags, torque_flags,
+    Header, JointState, LifecycleHook, LifecycleState, MAX_JOINTS, TorqueCommand, state_flags,
+    torque_flags,
 };
 use microrobot_model::{JointKind, JointVector, Robot};
 use microrobot_runtime::config::PipelineConfig;
@@ -264,6 +265,20 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         now_ns: u64,
         from_pipeline: impl FnOnce() -> bool,
     ) -> Result<(), Refusal> {
+        self.accept_torque_announced(msg, publisher, now_ns, from_pipeline, &mut |_| {})
+    }
+
+    /// [`Self::accept_torque_from`], calling `announce` just before a lifecycle hook
+    /// that blocks the cycle runs (the activation a first accepted command starts), so
+    /// the stage can say so in its status first.
+    pub fn accept_torque_announced(
+        &mut self,
+        msg: &TorqueCommand,
+        publisher: u128,
+        now_ns: u64,
+        from_pipeline: impl FnOnce() -> bool,
+        announce: &mut dyn FnMut(LifecycleHook),
+    ) -> Result<(), Refusal> {
         let r = check_torque(msg, self.dof)
             .and_then(|()| {
                 if self.lockstep {
@@ -305,7 +320,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                 self.watchdog.feed(now_ns);
                 if self.hw.state() == LifecycleState::Inactive
                     && !self.safety.latched()
-                    && self.hw.activate()
+                    && self.hw.activate_announced(announce)
                 {
                     self.safety.on_switch_on();
                 }
@@ -353,8 +368,17 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
     /// A Reset command: leaves the safe state (bumplessly, blended) if commands are
     /// fresh, and acknowledges a backend fault. Returns whether anything was reset.
     pub fn reset(&mut self, now_ns: u64) -> bool {
+        self.reset_announced(now_ns, &mut |_| {})
+    }
+
+    /// [`Self::reset`], calling `announce` just before the backend's `on_reset` runs.
+    pub fn reset_announced(
+        &mut self,
+        now_ns: u64,
+        announce: &mut dyn FnMut(LifecycleHook),
+    ) -> bool {
         let mut did = false;
-        if self.hw.state() == LifecycleState::Fault && self.hw.reset_fault() {
+        if self.hw.state() == LifecycleState::Fault && self.hw.reset_fault_announced(announce) {
             did = true;
         }
         self.count_backend_faults();

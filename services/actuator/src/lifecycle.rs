@@ -4,10 +4,13 @@
 //! belongs to, so backends carry no state guards; a [`Fault`] returned by any call moves
 //! to Fault, keeps the fault for the status and log, and calls `on_error` once.
 
-use microrobot_messages::LifecycleState;
+use microrobot_messages::{LifecycleHook, LifecycleState};
 use microrobot_model::JointVector;
 
 use crate::backend::{ActuatorBackend, Fault, Measured};
+
+/// One of a backend's lifecycle hooks.
+type HookFn<B> = fn(&mut B) -> Result<(), Fault>;
 
 /// A backend and its lifecycle state.
 #[derive(Debug, Clone)]
@@ -74,11 +77,13 @@ impl<B: ActuatorBackend> Lifecycle<B> {
         &mut self,
         from: LifecycleState,
         to: LifecycleState,
-        hook: fn(&mut B) -> Result<(), Fault>,
+        (name, hook): (LifecycleHook, HookFn<B>),
+        announce: &mut dyn FnMut(LifecycleHook),
     ) -> bool {
         if self.state != from {
             return false;
         }
+        announce(name);
         let t0 = std::time::Instant::now();
         let r = hook(&mut self.backend);
         let took = u64::try_from(t0.elapsed().as_nanos()).unwrap_or(u64::MAX);
@@ -100,7 +105,8 @@ impl<B: ActuatorBackend> Lifecycle<B> {
         if self.transition(
             LifecycleState::Unconfigured,
             LifecycleState::Inactive,
-            B::on_configure,
+            (LifecycleHook::Configure, B::on_configure),
+            &mut |_| {},
         ) {
             Ok(())
         } else {
@@ -113,10 +119,17 @@ impl<B: ActuatorBackend> Lifecycle<B> {
 
     /// Inactive → Active (`on_activate`); whether it happened.
     pub fn activate(&mut self) -> bool {
+        self.activate_announced(&mut |_| {})
+    }
+
+    /// [`Self::activate`], calling `announce` just before the hook runs (not at all
+    /// when it does not).
+    pub fn activate_announced(&mut self, announce: &mut dyn FnMut(LifecycleHook)) -> bool {
         self.transition(
             LifecycleState::Inactive,
             LifecycleState::Active,
-            B::on_activate,
+            (LifecycleHook::Activate, B::on_activate),
+            announce,
         )
     }
 
@@ -125,13 +138,25 @@ impl<B: ActuatorBackend> Lifecycle<B> {
         self.transition(
             LifecycleState::Active,
             LifecycleState::Inactive,
-            B::on_deactivate,
+            (LifecycleHook::Deactivate, B::on_deactivate),
+            &mut |_| {},
         )
     }
 
     /// Fault → Inactive (`on_reset`); whether it happened.
     pub fn reset_fault(&mut self) -> bool {
-        self.transition(LifecycleState::Fault, LifecycleState::Inactive, B::on_reset)
+        self.reset_fault_announced(&mut |_| {})
+    }
+
+    /// [`Self::reset_fault`], calling `announce` just before the hook runs (not at all
+    /// when it does not).
+    pub fn reset_fault_announced(&mut self, announce: &mut dyn FnMut(LifecycleHook)) -> bool {
+        self.transition(
+            LifecycleState::Fault,
+            LifecycleState::Inactive,
+            (LifecycleHook::Reset, B::on_reset),
+            announce,
+        )
     }
 
     /// Writes `tau` while Active; false if not active or the backend faulted.

@@ -8,8 +8,8 @@
 
 use anyhow::Context as _;
 use microrobot_messages::{
-    CommandKind, JointState, MotionCommand, RefusalReason, ServiceRole, ServiceStatus,
-    TorqueCommand, monotonic_ns, topic,
+    CommandKind, JointState, LifecycleHook, MotionCommand, RefusalReason, ServiceRole,
+    ServiceStatus, TorqueCommand, monotonic_ns, topic,
 };
 use microrobot_model::{JointVector, Robot};
 use microrobot_runtime::config::{OwnedSection, PipelineConfig};
@@ -159,6 +159,7 @@ where
             answered: u64::MAX,
             accepted: u64::MAX,
             faults_logged: 0,
+            hook_budget_ms: hook_budget_ms(&actuator),
         };
         // Initial state (history 1 on State: the planner starts from it).
         let first = stage.core.state_message(monotonic_ns());
@@ -270,6 +271,25 @@ pub(crate) struct ActuatorStage<B: ActuatorBackend> {
     answered: u64,
     accepted: u64,
     faults_logged: u64,
+    /// `actuator.hook_budget_ms`, as the status carries it.
+    hook_budget_ms: u32,
+}
+
+/// `actuator.hook_budget_ms` for the status (whole ms, at least 1).
+fn hook_budget_ms(actuator: &ActuatorConfig) -> u32 {
+    // Validated to (0, 600000] ms.
+    (actuator.hook_budget_s() * 1e3)
+        .ceil()
+        .clamp(1.0, f64::from(u32::MAX)) as u32
+}
+
+/// Says in the status, sent at once, that the cycle is about to block inside `hook`
+/// for up to `budget_ms` (the next status, at the end of the wake-up, clears it).
+fn announce_hook(cycle: &mut Cycle<'_>, hook: LifecycleHook, budget_ms: u32) {
+    cycle.publish_status_with(|st| {
+        st.hook = hook as u32;
+        st.hook_budget_ms = budget_ms;
+    });
 }
 
 impl<B: ActuatorBackend> ActuatorStage<B> {
@@ -325,13 +345,19 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
         }
     }
 
-    fn take_torques(&mut self, ports: &Ports, cfg: &PipelineConfig, was_latched: &mut bool) {
+    fn take_torques(&mut self, ports: &Ports, cycle: &mut Cycle<'_>, was_latched: &mut bool) {
+        let cfg = cycle.cfg;
+        let budget = self.hook_budget_ms;
         ports.torques.drain(|r| {
             let msg = r.msg;
             let now = monotonic_ns();
-            let verdict = self
-                .core
-                .accept_torque_from(&msg, r.publisher, now, || r.from_pipeline());
+            let verdict = self.core.accept_torque_announced(
+                &msg,
+                r.publisher,
+                now,
+                || r.from_pipeline(),
+                &mut |hook| announce_hook(cycle, hook, budget),
+            );
             if verdict == Err(Refusal::Outsider) && !*was_latched && self.core.safe_state_latched()
             {
                 *was_latched = true;
@@ -371,13 +397,17 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
         true
     }
 
-    fn take_commands(&mut self, ports: &Ports, cfg: &PipelineConfig, woken: bool) {
+    fn take_commands(&mut self, ports: &Ports, cycle: &mut Cycle<'_>, woken: bool) {
+        let cfg = cycle.cfg;
+        let budget = self.hook_budget_ms;
         if woken {
             ports.commands.clear_events();
         }
         ports.commands.for_each(|r| {
             if CommandKind::from_wire(r.msg.kind) == Some(CommandKind::Reset)
-                && self.core.reset(monotonic_ns())
+                && self.core.reset_announced(monotonic_ns(), &mut |hook| {
+                    announce_hook(cycle, hook, budget)
+                })
             {
                 tracing::info!("actuator: reset, following torque commands again");
                 let blocked = self.after_hooks(ports);
@@ -455,11 +485,11 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
             );
         }
         if ready.contains(on.torque) {
-            self.take_torques(ports, cfg, &mut was_latched);
+            self.take_torques(ports, cycle, &mut was_latched);
         }
         // Commands are looked at on every wake-up (see the planner: a new sender's sample
         // can become visible after its notification).
-        self.take_commands(ports, cfg, ready.contains(on.command));
+        self.take_commands(ports, cycle, ready.contains(on.command));
         if ready.contains(on.timer) {
             self.on_timer(ports, cfg);
         }
@@ -505,6 +535,9 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
             st.fault_code = f.code;
             st.fault_joint = f.joint.map_or(0, |j| j as u32 + 1);
         }
+        // Out of any hook (see `announce_hook`).
+        st.hook = LifecycleHook::None as u32;
+        st.hook_budget_ms = 0;
     }
 
     /// Safe on the way out, however the stop was asked for (Ctrl-C, SIGTERM, the

@@ -8,7 +8,9 @@ use std::time::Duration;
 
 use microrobot_actuator::backend::{ActuatorBackend, Fault, Measured};
 use microrobot_actuator::{ActuatorConfig, ActuatorCore, Mode, SimArm, initial_q};
-use microrobot_messages::{Header, LifecycleState, TorqueCommand, state_flags, torque_flags};
+use microrobot_messages::{
+    Header, LifecycleHook, LifecycleState, TorqueCommand, state_flags, torque_flags,
+};
 use microrobot_model::JointVector;
 use microrobot_model::Robot;
 use microrobot_runtime::config::PipelineConfig;
@@ -324,4 +326,115 @@ fn a_reset_blocking_longer_than_fault_ms_recovers_free_running() {
 #[test]
 fn a_reset_blocking_longer_than_fault_ms_recovers_in_lockstep() {
     reset_blocking_longer_than_fault_ms_recovers(true);
+}
+
+/// The simulated arm behind a bus whose hooks block for longer than the supervisor's
+/// `hung_ms` and the watchdog's `fault_ms` (500 ms and 200 ms by default), recording
+/// what the framework announced and which hook ran, in order.
+struct SlowHooksArm {
+    sim: SimArm,
+    fail: Arc<AtomicBool>,
+    events: Arc<std::sync::Mutex<Vec<String>>>,
+}
+
+const HOOK_BLOCKS: Duration = Duration::from_millis(600);
+
+impl SlowHooksArm {
+    fn note(&self, what: &str) {
+        self.events.lock().unwrap().push(what.to_string());
+    }
+}
+
+impl ActuatorBackend for SlowHooksArm {
+    fn dof(&self) -> usize {
+        self.sim.dof()
+    }
+    fn on_activate(&mut self) -> Result<(), Fault> {
+        self.note("on_activate");
+        std::thread::sleep(HOOK_BLOCKS);
+        Ok(())
+    }
+    fn on_reset(&mut self) -> Result<(), Fault> {
+        self.note("on_reset");
+        std::thread::sleep(HOOK_BLOCKS);
+        self.fail.store(false, Ordering::Relaxed);
+        Ok(())
+    }
+    fn write(&mut self, now_ns: u64, period_s: f64, tau: &JointVector) -> Result<(), Fault> {
+        if self.fail.load(Ordering::Relaxed) {
+            return Err(Fault::drive(0x8130, "bus lost"));
+        }
+        self.sim.write(now_ns, period_s, tau)
+    }
+    fn read(&mut self, now_ns: u64) -> Result<Measured, Fault> {
+        self.sim.read(now_ns)
+    }
+}
+
+/// Every hook that blocks the cycle is announced just before it runs (the stage then
+/// publishes a status naming it and its budget, so the supervisor does not take the
+/// blocked actuator for hung), and only then: a call that runs no hook announces none.
+#[test]
+fn a_hook_blocking_longer_than_hung_ms_is_announced_before_it_runs() {
+    let cfg = PipelineConfig {
+        robot: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml"),
+        ..Default::default()
+    };
+    assert!(HOOK_BLOCKS.as_secs_f64() * 1e3 > cfg.supervisor.hung_ms);
+    let robot = Robot::from_file(&cfg.robot).unwrap();
+    let a = ActuatorConfig::default();
+    assert!(
+        a.hook_budget_s() > HOOK_BLOCKS.as_secs_f64(),
+        "the default budget covers it"
+    );
+    let fail = Arc::new(AtomicBool::new(false));
+    let events = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let arm = SlowHooksArm {
+        sim: SimArm::new(&robot, &a.sim, &initial_q(&robot, &a.sim)),
+        fail: fail.clone(),
+        events: events.clone(),
+    };
+    let mut c = ActuatorCore::new(arm, &robot, &cfg, &a).unwrap();
+    let note = |e: &Arc<std::sync::Mutex<Vec<String>>>, h: LifecycleHook| {
+        e.lock().unwrap().push(format!("announce {}", h.name()));
+    };
+    let t0 = 1000 * MS;
+    // The first command activates (blocking).
+    c.accept_torque_announced(&torque(1, t0), 1, t0, || true, &mut |h| note(&events, h))
+        .unwrap();
+    let took = c.take_hook_ns();
+    assert!(took >= HOOK_BLOCKS.as_nanos() as u64);
+    let mut t = t0 + took;
+    // The next ones run no hook, nor does a reset without a fault.
+    c.accept_torque_announced(&torque(2, t), 1, t, || true, &mut |h| note(&events, h))
+        .unwrap();
+    assert!(!c.reset_announced(t, &mut |h| note(&events, h)));
+    assert_eq!(
+        *events.lock().unwrap(),
+        ["announce on_activate", "on_activate"]
+    );
+    c.check_watchdog(t);
+    c.step(t);
+    assert_eq!(c.lifecycle(), LifecycleState::Active);
+    // A bus fault, then a reset that blocks: announced first.
+    fail.store(true, Ordering::Relaxed);
+    t += MS;
+    c.accept_torque(&torque(3, t), 1, t).unwrap();
+    c.step(t);
+    assert_eq!(c.lifecycle(), LifecycleState::Fault);
+    events.lock().unwrap().clear();
+    assert!(c.reset_announced(t, &mut |h| note(&events, h)));
+    assert_eq!(*events.lock().unwrap(), ["announce on_reset", "on_reset"]);
+    t += c.take_hook_ns();
+    // The activation after it, on the next fresh command, is announced too.
+    events.lock().unwrap().clear();
+    c.step(t);
+    t += MS;
+    c.accept_torque_announced(&torque(4, t), 1, t, || true, &mut |h| note(&events, h))
+        .unwrap();
+    assert_eq!(
+        *events.lock().unwrap(),
+        ["announce on_activate", "on_activate"]
+    );
+    assert_eq!(c.lifecycle(), LifecycleState::Active);
 }

@@ -638,15 +638,49 @@ impl PlannerCore {
 
     /// The shortest jerk-limited stop from the current setpoint state, within the
     /// robot's limits or (`estop`) the e-stop's.
+    ///
+    /// The stop stays within every joint's position range: a joint whose own stop would
+    /// leave it (the setpoint following a measured arm that moves towards a limit, e.g.
+    /// one that sagged while its drives were off for a reset) stops at once where it is
+    /// instead. A setpoint outside the range would be refused by the dynamics, leaving
+    /// the actuator without torque commands.
     fn brake(&self, estop: bool) -> Result<Generator, CommandError> {
         let lim = if estop {
             self.estop_limits
         } else {
             self.full_limits
         };
-        let t =
-            stop_trajectory(self.dof, &self.current.state(), &lim).map_err(CommandError::Limits)?;
+        let mut start = self.current.state();
+        let t = stop_trajectory(self.dof, &start, &lim).map_err(CommandError::Limits)?;
+        let leaving = self.leaving_range(&t);
+        if !leaving.iter().any(|&l| l) {
+            return Ok(Generator::new(t));
+        }
+        for (i, j) in self.robot.joints().iter().enumerate().take(self.dof) {
+            if leaving[i] {
+                start.q[i] = j.limits.clamp(start.q[i]);
+                start.qd[i] = 0.0;
+                start.qdd[i] = 0.0;
+            }
+        }
+        let t = stop_trajectory(self.dof, &start, &lim).map_err(CommandError::Limits)?;
         Ok(Generator::new(t))
+    }
+
+    /// Which joints of the stop `t` leave their position range, checked at
+    /// [`STOP_CHECKS`] + 1 instants from its start to its end (once per stop, not per
+    /// cycle).
+    fn leaving_range(&self, t: &Trajectory) -> [bool; MAX_JOINTS] {
+        let mut out = [false; MAX_JOINTS];
+        let mut at = Sample::default();
+        let d = t.duration();
+        for k in 0..=STOP_CHECKS {
+            t.sample_into(d * k as f64 / STOP_CHECKS as f64, &mut at);
+            for (i, j) in self.robot.joints().iter().enumerate().take(self.dof) {
+                out[i] |= !j.limits.contains(at.q[i]);
+            }
+        }
+        out
     }
 
     /// Validates and executes a motion command received at `now_ns`.
@@ -1038,6 +1072,10 @@ impl PlannerCore {
         sp
     }
 }
+
+/// Instants of a stop checked against the joints' ranges, its start and end included
+/// (the end is its extreme while each joint's velocity keeps its sign, the usual case).
+const STOP_CHECKS: usize = 16;
 
 /// Loads the robot file named by the config (a bad file is a config error).
 pub fn load_robot(cfg: &PipelineConfig) -> anyhow::Result<Robot> {

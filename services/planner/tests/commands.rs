@@ -447,3 +447,71 @@ fn a_flood_of_random_commands_keeps_the_setpoints_continuous() {
         "{resets_while_braking} resets while braking"
     );
 }
+
+/// Resuming after a reset from a measured arm that moves towards a joint limit (it
+/// sagged while its drives were off): the stop from there stays within every joint's
+/// range (the dynamics refuses a setpoint outside it, and the actuator would get no
+/// torque); the joint that would leave it stops at once where it is, the others brake
+/// from their measured velocity.
+#[test]
+fn a_resume_towards_a_joint_limit_stops_within_the_range() {
+    let cfg = PipelineConfig {
+        robot: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/robots/seed-arm.toml"),
+        ..Default::default()
+    };
+    let robot = Robot::from_file(&cfg.robot).unwrap();
+    let mut p = PlannerCore::new(&robot, &cfg, None);
+    // As measured in an EtherCAT fault test: joint 6 (range ±π) 0.02 rad from its
+    // limit at 1.09 rad/s towards it, joint 5 falling at 0.64 rad/s mid-range.
+    let q = [
+        3.141569, -1.570791, 0.000009, -3.141579, -0.176718, -3.122121,
+    ];
+    let qd = [
+        0.000466, -0.000222, -0.004398, -0.000190, -0.635701, -1.089624,
+    ];
+    let state = |seq: u64, safe: bool| {
+        let mut s = JointState {
+            dof: 6,
+            flags: if safe {
+                microrobot_messages::state_flags::SAFE_STATE
+            } else {
+                0
+            },
+            header: microrobot_messages::Header {
+                seq,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        s.q[..6].copy_from_slice(&q);
+        s.qd[..6].copy_from_slice(&qd);
+        s
+    };
+    assert!(p.accept_state(&state(1, true), 1, 0));
+    p.check_state(0);
+    assert_eq!(p.mode(), Mode::SafeHold);
+    assert!(p.on_command(&cmd(CommandKind::Reset), 0).is_ok());
+    assert!(p.accept_state(&state(2, false), 1, 0));
+    p.check_state(0);
+    assert_ne!(p.mode(), Mode::SafeHold, "resumed");
+    let joints = robot.joints();
+    let mut first = None;
+    for k in 0..2000 {
+        let sp = p.tick(0);
+        for (i, j) in joints.iter().enumerate() {
+            assert!(
+                j.limits.contains(sp.q[i]),
+                "tick {k}: joint {} at {} outside [{}, {}]",
+                i + 1,
+                sp.q[i],
+                j.limits.min,
+                j.limits.max
+            );
+        }
+        first.get_or_insert(sp);
+    }
+    let first = first.unwrap();
+    // Joint 6 stops where it is; joint 5 brakes from its measured velocity.
+    assert_eq!(first.qd[5], 0.0);
+    assert!((first.qd[4] - qd[4]).abs() < 0.01, "{}", first.qd[4]);
+}

@@ -57,6 +57,7 @@ pub struct Cycle<'a> {
     /// The status the runner publishes (a stage writes what [`Stage::report`] cannot
     /// know afterwards, e.g. the verdict of a command it just took).
     pub status: &'a mut ServiceStatus,
+    status_port: &'a mut StatusPort,
     publish_status: bool,
 }
 
@@ -64,6 +65,16 @@ impl Cycle<'_> {
     /// Publishes the status at the end of this wake-up rather than at the next period
     /// (a command's sender waits for its verdict).
     pub fn publish_status_now(&mut self) {
+        self.publish_status = true;
+    }
+
+    /// Publishes the status at once, in the middle of the wake-up, after `fill` wrote
+    /// into it (the counters are those of the last [`Stage::report`]): e.g. the
+    /// actuator saying it is about to block inside a lifecycle hook. Another status
+    /// follows at the end of this wake-up.
+    pub fn publish_status_with(&mut self, fill: impl FnOnce(&mut ServiceStatus)) {
+        fill(self.status);
+        self.status_port.publish(monotonic_ns(), self.status);
         self.publish_status = true;
     }
 }
@@ -144,6 +155,7 @@ pub fn serve<S: Stage>(
             cfg,
             shutdown,
             status: &mut status,
+            status_port: &mut status_port,
             publish_status: false,
         };
         stage.wake(&ports, on, ready, &mut cycle)?;

@@ -18,7 +18,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use microrobot_messages::{
-    Activity, LifecycleState, ProgramEnd, ProgramState, ServiceRole, ServiceStatus, monotonic_ns,
+    Activity, LifecycleHook, LifecycleState, ProgramEnd, ProgramState, ServiceRole, ServiceStatus,
+    monotonic_ns,
 };
 use microrobot_model::Robot;
 use microrobot_runtime::config::{FailurePolicy, OwnedSection as _};
@@ -970,22 +971,19 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
                 && hung[i].is_none()
                 && let Some(seen) = &monitor.latest[i]
                 && seen.status.lifecycle != LifecycleState::Finalized as u32
-                && seen.at.elapsed() >= hung_after
+                && let Some(why) = hang(&seen.status, seen.at.elapsed(), hung_after)
                 && let Some(s) = pipe.service(role)
                 && s.poll_exit().is_none()
             {
-                let silent_ms = seen.at.elapsed().as_secs_f64() * 1e3;
                 hooks.hung(role, s.pid());
                 progress.note(&format!(
-                    "{} (pid {}) hung: no status for {silent_ms:.0} ms (supervisor.hung_ms = {}); killing it",
+                    "{} (pid {}) hung: {}; killing it",
                     role.name(),
                     s.pid(),
-                    cfg.supervisor.hung_ms
+                    why.note(cfg.supervisor.hung_ms)
                 ));
                 s.signal(libc::SIGKILL);
-                hung[i] = Some(format!(
-                    "hung (its process lived but sent no status for {silent_ms:.0} ms; killed)"
-                ));
+                hung[i] = Some(why.verdict());
             }
             // A restarted service must report ready in time.
             if let Some(since) = pipe.restarting[i] {
@@ -1401,6 +1399,74 @@ fn stop_recorder(recorder: &mut Service, grace: Duration) -> bool {
     }
 }
 
+/// Why a live service is taken for hung ([`hang`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Hang {
+    /// No status for `silent_ms`, beyond `supervisor.hung_ms`.
+    Silent { silent_ms: f64 },
+    /// Its last status said it entered lifecycle hook `hook`, allowed to block for
+    /// `budget_ms`; silent for `silent_ms` since, beyond that budget.
+    InHook {
+        hook: LifecycleHook,
+        budget_ms: u32,
+        silent_ms: f64,
+    },
+}
+
+impl Hang {
+    /// The progress line's reason (after "hung: ").
+    fn note(self, hung_ms: f64) -> String {
+        match self {
+            Self::Silent { silent_ms } => {
+                format!("no status for {silent_ms:.0} ms (supervisor.hung_ms = {hung_ms})")
+            }
+            Self::InHook {
+                hook,
+                budget_ms,
+                silent_ms,
+            } => format!(
+                "inside its {} hook for {silent_ms:.0} ms, beyond the hook's budget of {budget_ms} ms (actuator.hook_budget_ms)",
+                hook.name()
+            ),
+        }
+    }
+
+    /// What its death is reported as in the verdict.
+    fn verdict(self) -> String {
+        match self {
+            Self::Silent { silent_ms } => {
+                format!("hung (its process lived but sent no status for {silent_ms:.0} ms; killed)")
+            }
+            Self::InHook {
+                hook,
+                budget_ms,
+                silent_ms,
+            } => format!(
+                "hung (its process lived but stayed inside its {} hook for {silent_ms:.0} ms, beyond the hook's budget of {budget_ms} ms (actuator.hook_budget_ms); killed)",
+                hook.name()
+            ),
+        }
+    }
+}
+
+/// Whether a live service whose last status is `last`, silent for `silent` since, is
+/// hung: silent for `hung_after` (`supervisor.hung_ms`), or, while `last` says it is
+/// inside a lifecycle hook, for longer than the hook's declared budget (if that is
+/// longer: a hook that brings a bus up again blocks the cycle, and so its status).
+fn hang(last: &ServiceStatus, silent: Duration, hung_after: Duration) -> Option<Hang> {
+    let silent_ms = silent.as_secs_f64() * 1e3;
+    let hook = LifecycleHook::from_wire(last.hook).unwrap_or(LifecycleHook::None);
+    let budget = Duration::from_millis(u64::from(last.hook_budget_ms));
+    if hook != LifecycleHook::None && budget > hung_after {
+        return (silent > budget).then_some(Hang::InHook {
+            hook,
+            budget_ms: last.hook_budget_ms,
+            silent_ms,
+        });
+    }
+    (silent >= hung_after).then_some(Hang::Silent { silent_ms })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1437,6 +1503,60 @@ mod tests {
             code
         })
         .collect()
+    }
+
+    #[test]
+    fn a_hook_is_given_its_budget_and_caught_as_hung_beyond_it() {
+        let ms = Duration::from_millis;
+        let hung_after = ms(500);
+        let plain = ServiceStatus {
+            role: ServiceRole::Actuator as u32,
+            ..Default::default()
+        };
+        assert_eq!(hang(&plain, ms(499), hung_after), None);
+        assert!(matches!(
+            hang(&plain, ms(500), hung_after),
+            Some(Hang::Silent { .. })
+        ));
+        let in_reset = ServiceStatus {
+            hook: LifecycleHook::Reset as u32,
+            hook_budget_ms: 3000,
+            ..plain
+        };
+        // A reset that brings a bus up again is no hang within its budget...
+        assert_eq!(hang(&in_reset, ms(600), hung_after), None);
+        assert_eq!(hang(&in_reset, ms(3000), hung_after), None);
+        // ... and is one beyond it, named with its hook and budget.
+        let h = hang(&in_reset, ms(3001), hung_after).expect("hung");
+        assert_eq!(
+            h,
+            Hang::InHook {
+                hook: LifecycleHook::Reset,
+                budget_ms: 3000,
+                silent_ms: 3001.0
+            }
+        );
+        let v = h.verdict();
+        assert!(v.contains("on_reset") && v.contains("3000 ms"), "{v}");
+        assert!(h.note(500.0).contains("actuator.hook_budget_ms"));
+        // A budget shorter than hung_ms never makes the check stricter.
+        let short = ServiceStatus {
+            hook: LifecycleHook::Activate as u32,
+            hook_budget_ms: 100,
+            ..plain
+        };
+        assert_eq!(hang(&short, ms(400), hung_after), None);
+        assert!(matches!(
+            hang(&short, ms(500), hung_after),
+            Some(Hang::Silent { .. })
+        ));
+        // An unknown hook value is no hook.
+        let unknown = ServiceStatus {
+            hook: 99,
+            hook_budget_ms: 3000,
+            ..plain
+        };
+        assert!(hang(&unknown, ms(500), hung_after).is_some());
     }
 
     #[test]
