@@ -125,16 +125,13 @@ pub fn enter_cycle(cfg: &RealtimeConfig, g: &mut RtGuard) {
         note(r, "cpu_affinity", g);
     }
     if cfg.sched_fifo_priority > 0 {
-        let param = libc::sched_param {
-            sched_priority: cfg.sched_fifo_priority as i32,
-        };
-        // SAFETY: `param` is a valid sched_param; pid 0 is the calling thread.
-        let r = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
-        if r == 0 {
-            g.fifo_priority = Some(param.sched_priority);
+        let priority = cfg.sched_fifo_priority as i32;
+        let ok = set_scheduler(libc::SCHED_FIFO, priority);
+        if ok {
+            g.fifo_priority = Some(priority);
         }
         note(
-            if r == 0 {
+            if ok {
                 Ok(())
             } else {
                 Err(format!("sched_setscheduler(SCHED_FIFO): {}", errno()))
