@@ -358,22 +358,8 @@ impl Rig {
     }
 
     /// Polls until `done` holds for the newest data or `timeout` passes.
-    fn wait(
-        &mut self,
-        timeout: Duration,
-        mut done: impl FnMut(&Self) -> bool,
-    ) -> anyhow::Result<bool> {
-        let end = Instant::now() + timeout;
-        loop {
-            self.pump()?;
-            if done(self) {
-                return Ok(true);
-            }
-            if Instant::now() >= end {
-                return Ok(false);
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
+    fn wait(&mut self, timeout: Duration, done: impl FnMut(&Self) -> bool) -> anyhow::Result<bool> {
+        crate::monitor::poll_until(self, timeout, Duration::from_millis(1), Self::pump, done)
     }
 }
 

@@ -135,18 +135,37 @@ impl StatusMonitor {
     pub fn wait_for(
         &mut self,
         timeout: Duration,
-        mut done: impl FnMut(&Self) -> bool,
+        done: impl FnMut(&Self) -> bool,
     ) -> anyhow::Result<bool> {
-        let end = Instant::now() + timeout;
-        loop {
-            self.poll()?;
-            if done(self) {
-                return Ok(true);
-            }
-            if Instant::now() >= end {
-                return Ok(false);
-            }
-            std::thread::sleep(Duration::from_millis(10));
+        poll_until(
+            self,
+            timeout,
+            Duration::from_millis(10),
+            |m| m.poll().map(drop),
+            done,
+        )
+    }
+}
+
+/// Runs `pump` on `subject` every `interval` until `done` holds for it (true) or
+/// `timeout` passes (false): the wait of every bus watcher here (the status monitor,
+/// driver-check's rig).
+pub(crate) fn poll_until<S>(
+    subject: &mut S,
+    timeout: Duration,
+    interval: Duration,
+    mut pump: impl FnMut(&mut S) -> anyhow::Result<()>,
+    mut done: impl FnMut(&S) -> bool,
+) -> anyhow::Result<bool> {
+    let end = Instant::now() + timeout;
+    loop {
+        pump(subject)?;
+        if done(subject) {
+            return Ok(true);
         }
+        if Instant::now() >= end {
+            return Ok(false);
+        }
+        std::thread::sleep(interval);
     }
 }
