@@ -92,17 +92,10 @@ pub struct ActuatorConfig {
     /// How long one lifecycle hook of the backend (an `on_reset` that brings a bus up
     /// again, an `on_activate` that enables drives) may block the cycle (ms): the
     /// status says so before the hook, and the supervisor takes the actuator for hung
-    /// only once it has been silent for longer (see [`Self::hook_budget_s`]).
+    /// only once it has been silent for longer.
     pub hook_budget_ms: f64,
     /// The simulated arm.
     pub sim: SimConfig,
-}
-
-impl ActuatorConfig {
-    /// `hook_budget_ms` in s.
-    pub fn hook_budget_s(&self) -> f64 {
-        self.hook_budget_ms * 1e-3
-    }
 }
 
 impl Default for ActuatorConfig {

@@ -250,28 +250,17 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         publisher: u128,
         now_ns: u64,
     ) -> Result<(), Refusal> {
-        self.accept_torque_from(msg, publisher, now_ns, || true)
+        self.accept_torque_from(msg, publisher, now_ns, || true, &mut |_| {})
     }
 
     /// [`Self::accept_torque`], where a well-formed command from a publisher the stream
     /// does not follow yet is taken only if `from_pipeline()` says the pipeline's
     /// supervisor started its process (the stage asks [`microrobot_runtime::provenance`]).
     /// One that is not is refused ([`Refusal::Outsider`]) and, with the drives on,
-    /// latches the safe state: someone is trying to drive the arm.
+    /// latches the safe state: someone is trying to drive the arm. `announce` is called
+    /// just before a lifecycle hook that blocks the cycle runs (the activation a first
+    /// accepted command starts), so the stage can say so in its status first.
     pub fn accept_torque_from(
-        &mut self,
-        msg: &TorqueCommand,
-        publisher: u128,
-        now_ns: u64,
-        from_pipeline: impl FnOnce() -> bool,
-    ) -> Result<(), Refusal> {
-        self.accept_torque_announced(msg, publisher, now_ns, from_pipeline, &mut |_| {})
-    }
-
-    /// [`Self::accept_torque_from`], calling `announce` just before a lifecycle hook
-    /// that blocks the cycle runs (the activation a first accepted command starts), so
-    /// the stage can say so in its status first.
-    pub fn accept_torque_announced(
         &mut self,
         msg: &TorqueCommand,
         publisher: u128,
@@ -320,7 +309,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
                 self.watchdog.feed(now_ns);
                 if self.hw.state() == LifecycleState::Inactive
                     && !self.safety.latched()
-                    && self.hw.activate_announced(announce)
+                    && self.hw.activate(announce)
                 {
                     self.safety.on_switch_on();
                 }
@@ -367,18 +356,10 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
 
     /// A Reset command: leaves the safe state (bumplessly, blended) if commands are
     /// fresh, and acknowledges a backend fault. Returns whether anything was reset.
-    pub fn reset(&mut self, now_ns: u64) -> bool {
-        self.reset_announced(now_ns, &mut |_| {})
-    }
-
-    /// [`Self::reset`], calling `announce` just before the backend's `on_reset` runs.
-    pub fn reset_announced(
-        &mut self,
-        now_ns: u64,
-        announce: &mut dyn FnMut(LifecycleHook),
-    ) -> bool {
+    /// `announce` is called just before the backend's `on_reset` runs.
+    pub fn reset(&mut self, now_ns: u64, announce: &mut dyn FnMut(LifecycleHook)) -> bool {
         let mut did = false;
-        if self.hw.state() == LifecycleState::Fault && self.hw.reset_fault_announced(announce) {
+        if self.hw.state() == LifecycleState::Fault && self.hw.reset_fault(announce) {
             did = true;
         }
         self.count_backend_faults();
@@ -428,7 +409,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         self.safety.blend_from(&t);
         if latch {
             if self.hw.state() == LifecycleState::Inactive {
-                let _ = self.hw.activate();
+                let _ = self.hw.activate(&mut |_| {});
                 self.after_hooks();
                 self.count_backend_faults();
             }

@@ -117,14 +117,9 @@ impl<B: ActuatorBackend> Lifecycle<B> {
         }
     }
 
-    /// Inactive → Active (`on_activate`); whether it happened.
-    pub fn activate(&mut self) -> bool {
-        self.activate_announced(&mut |_| {})
-    }
-
-    /// [`Self::activate`], calling `announce` just before the hook runs (not at all
-    /// when it does not).
-    pub fn activate_announced(&mut self, announce: &mut dyn FnMut(LifecycleHook)) -> bool {
+    /// Inactive → Active (`on_activate`); whether it happened. `announce` is called just
+    /// before the hook runs (not at all when it does not).
+    pub fn activate(&mut self, announce: &mut dyn FnMut(LifecycleHook)) -> bool {
         self.transition(
             LifecycleState::Inactive,
             LifecycleState::Active,
@@ -143,14 +138,9 @@ impl<B: ActuatorBackend> Lifecycle<B> {
         )
     }
 
-    /// Fault → Inactive (`on_reset`); whether it happened.
-    pub fn reset_fault(&mut self) -> bool {
-        self.reset_fault_announced(&mut |_| {})
-    }
-
-    /// [`Self::reset_fault`], calling `announce` just before the hook runs (not at all
-    /// when it does not).
-    pub fn reset_fault_announced(&mut self, announce: &mut dyn FnMut(LifecycleHook)) -> bool {
+    /// Fault → Inactive (`on_reset`); whether it happened. `announce` is called just
+    /// before the hook runs (not at all when it does not).
+    pub fn reset_fault(&mut self, announce: &mut dyn FnMut(LifecycleHook)) -> bool {
         self.transition(
             LifecycleState::Fault,
             LifecycleState::Inactive,
@@ -256,12 +246,12 @@ mod tests {
     fn hooks_run_only_in_their_state_and_a_fault_latches_until_reset() {
         let mut l = Lifecycle::new(Probe::default());
         assert!(l.read(0).is_none(), "no read before configure");
-        assert!(!l.activate(), "no activate before configure");
+        assert!(!l.activate(&mut |_| {}), "no activate before configure");
         assert!(!l.write(0, 1e-3, &JointVector::zeros()));
         l.configure().unwrap();
         assert!(l.configure().is_err(), "configure once");
         assert!(!l.write(0, 1e-3, &JointVector::zeros()), "inactive");
-        assert!(l.activate());
+        assert!(l.activate(&mut |_| {}));
         assert!(l.write(0, 1e-3, &JointVector::zeros()));
         l.backend_mut().fail_write = true;
         assert!(!l.write(0, 1e-3, &JointVector::zeros()));
@@ -273,8 +263,8 @@ mod tests {
             !l.write(0, 1e-3, &JointVector::zeros()),
             "no write in Fault"
         );
-        assert!(!l.activate(), "no activate in Fault");
-        assert!(l.reset_fault());
+        assert!(!l.activate(&mut |_| {}), "no activate in Fault");
+        assert!(l.reset_fault(&mut |_| {}));
         assert_eq!(l.state(), LifecycleState::Inactive);
         l.finalize();
         l.finalize();

@@ -155,7 +155,6 @@ where
             // `phase`). When the planner ticks on states, this timer is the pipeline's
             // master clock and stays.
             phased: cfg.planner_ticks_on_states(),
-            steps_on_arrival: !cfg.planner_ticks_on_states(),
             answered: u64::MAX,
             accepted: u64::MAX,
             faults_logged: 0,
@@ -263,9 +262,6 @@ pub(crate) struct ActuatorStage<B: ActuatorBackend> {
     step_to_state: LatencyHistogram,
     /// Whether the plant's steps are phased against the planner's ticks (or need not be).
     phased: bool,
-    /// Free-running on the planner's clock: a torque steps its period's plant step
-    /// ([`ActuatorStage::step_on_arrival`]).
-    steps_on_arrival: bool,
     /// The torque the last published state answered, and the last torque accepted: in
     /// lockstep every torque is owed one state.
     answered: u64,
@@ -278,7 +274,8 @@ pub(crate) struct ActuatorStage<B: ActuatorBackend> {
 /// `actuator.hook_budget_ms` for the status (whole ms, at least 1).
 fn hook_budget_ms(actuator: &ActuatorConfig) -> u32 {
     // Validated to (0, 600000] ms.
-    (actuator.hook_budget_s() * 1e3)
+    actuator
+        .hook_budget_ms
         .ceil()
         .clamp(1.0, f64::from(u32::MAX)) as u32
 }
@@ -351,7 +348,7 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
         ports.torques.drain(|r| {
             let msg = r.msg;
             let now = monotonic_ns();
-            let verdict = self.core.accept_torque_announced(
+            let verdict = self.core.accept_torque_from(
                 &msg,
                 r.publisher,
                 now,
@@ -376,7 +373,7 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
                 }
                 if !self.core.steps_on_timer() {
                     self.step(ports, now);
-                } else if self.steps_on_arrival {
+                } else if !cfg.planner_ticks_on_states() {
                     self.step_on_arrival(ports, now);
                 }
             }
@@ -405,7 +402,7 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
         }
         ports.commands.for_each(|r| {
             if CommandKind::from_wire(r.msg.kind) == Some(CommandKind::Reset)
-                && self.core.reset_announced(monotonic_ns(), &mut |hook| {
+                && self.core.reset(monotonic_ns(), &mut |hook| {
                     announce_hook(cycle, hook, budget)
                 })
             {

@@ -81,7 +81,7 @@ fn missing_commands_hold_then_latch_until_reset() {
     assert_eq!(s.lifecycle, LifecycleState::Fault as u32);
     assert_eq!(c.counters.faults, 1);
     // Reset without fresh commands is refused.
-    assert!(!c.reset(t0 + 260 * MS));
+    assert!(!c.reset(t0 + 260 * MS, &mut |_| {}));
     assert!(c.safe_state_latched());
     // Fresh commands alone do not unlatch (no auto_resume) ...
     c.accept_torque(&torque(2, t0 + 270 * MS), 1, t0 + 270 * MS)
@@ -89,7 +89,7 @@ fn missing_commands_hold_then_latch_until_reset() {
     c.check_watchdog(t0 + 271 * MS);
     assert!(c.safe_state_latched());
     // ... a reset does.
-    assert!(c.reset(t0 + 272 * MS));
+    assert!(c.reset(t0 + 272 * MS, &mut |_| {}));
     assert!(!c.safe_state_latched());
 }
 
@@ -188,7 +188,7 @@ fn a_stall_longer_than_fault_ms_latches_the_safe_state_before_queued_commands_co
         c.accept_torque(&answering(2, wake, s.header.seq), 1, wake)
             .is_err()
     );
-    assert!(!c.reset(wake));
+    assert!(!c.reset(wake, &mut |_| {}));
     assert!(c.safe_state_latched());
     // A step never applies a command older than stale_ms, whatever the caller did.
     let s = c.step(wake);
@@ -213,34 +213,8 @@ fn lockstep_has_no_stalls() {
     assert!(!c.stalled());
 }
 
-/// The simulated arm behind a bus that can fail, and whose reset rebuilds the bus for
-/// longer than `fault_ms` (blocking, like a real master's).
-struct SlowResetArm {
-    sim: SimArm,
-    fail: Arc<AtomicBool>,
-}
-
+/// How long the slow bus's reset blocks in the `fault_ms` test (longer than `fault_ms`).
 const RESET_BLOCKS: Duration = Duration::from_millis(250);
-
-impl ActuatorBackend for SlowResetArm {
-    fn dof(&self) -> usize {
-        self.sim.dof()
-    }
-    fn on_reset(&mut self) -> Result<(), Fault> {
-        std::thread::sleep(RESET_BLOCKS);
-        self.fail.store(false, Ordering::Relaxed);
-        Ok(())
-    }
-    fn write(&mut self, now_ns: u64, period_s: f64, tau: &JointVector) -> Result<(), Fault> {
-        if self.fail.load(Ordering::Relaxed) {
-            return Err(Fault::drive(0x8130, "bus lost"));
-        }
-        self.sim.write(now_ns, period_s, tau)
-    }
-    fn read(&mut self, now_ns: u64) -> Result<Measured, Fault> {
-        self.sim.read(now_ns)
-    }
-}
 
 /// A bus fault, then a reset whose hook blocks for longer than `fault_ms`: the time
 /// inside the hook is neither a stall nor a silence, so the arm follows the next fresh
@@ -255,9 +229,12 @@ fn reset_blocking_longer_than_fault_ms_recovers(lockstep: bool) {
     let robot = Robot::from_file(&cfg.robot).unwrap();
     let fail = Arc::new(AtomicBool::new(false));
     let a = ActuatorConfig::default();
-    let arm = SlowResetArm {
+    let arm = SlowBusArm {
         sim: SimArm::new(&robot, &a.sim, &initial_q(&robot, &a.sim)),
         fail: fail.clone(),
+        reset_blocks: RESET_BLOCKS,
+        activate_blocks: Duration::ZERO,
+        events: Default::default(),
     };
     let mut c = ActuatorCore::new(arm, &robot, &cfg, &a).unwrap();
     let t0 = 1000 * MS;
@@ -279,7 +256,7 @@ fn reset_blocking_longer_than_fault_ms_recovers(lockstep: bool) {
     c.accept_torque(&torque(7, t), 1, t).unwrap();
     // The reset blocks: the fake clock moves on by what it really took.
     let start = std::time::Instant::now();
-    assert!(c.reset(t));
+    assert!(c.reset(t, &mut |_| {}));
     let took = start.elapsed().as_nanos() as u64;
     assert!(took >= RESET_BLOCKS.as_nanos() as u64);
     t += took;
@@ -328,35 +305,38 @@ fn a_reset_blocking_longer_than_fault_ms_recovers_in_lockstep() {
     reset_blocking_longer_than_fault_ms_recovers(true);
 }
 
-/// The simulated arm behind a bus whose hooks block for longer than the supervisor's
-/// `hung_ms` and the watchdog's `fault_ms` (500 ms and 200 ms by default), recording
-/// what the framework announced and which hook ran, in order.
-struct SlowHooksArm {
+/// The simulated arm behind a bus that can fail, whose hooks block (like a real
+/// master's that brings the bus up again), recording which hook ran, in order.
+struct SlowBusArm {
     sim: SimArm,
     fail: Arc<AtomicBool>,
+    reset_blocks: Duration,
+    activate_blocks: Duration,
     events: Arc<std::sync::Mutex<Vec<String>>>,
 }
 
+/// How long the slow bus's hooks block in the announcement test: longer than the
+/// supervisor's `hung_ms` and the watchdog's `fault_ms` (500 ms and 200 ms by default).
 const HOOK_BLOCKS: Duration = Duration::from_millis(600);
 
-impl SlowHooksArm {
+impl SlowBusArm {
     fn note(&self, what: &str) {
         self.events.lock().unwrap().push(what.to_string());
     }
 }
 
-impl ActuatorBackend for SlowHooksArm {
+impl ActuatorBackend for SlowBusArm {
     fn dof(&self) -> usize {
         self.sim.dof()
     }
     fn on_activate(&mut self) -> Result<(), Fault> {
         self.note("on_activate");
-        std::thread::sleep(HOOK_BLOCKS);
+        std::thread::sleep(self.activate_blocks);
         Ok(())
     }
     fn on_reset(&mut self) -> Result<(), Fault> {
         self.note("on_reset");
-        std::thread::sleep(HOOK_BLOCKS);
+        std::thread::sleep(self.reset_blocks);
         self.fail.store(false, Ordering::Relaxed);
         Ok(())
     }
@@ -384,14 +364,16 @@ fn a_hook_blocking_longer_than_hung_ms_is_announced_before_it_runs() {
     let robot = Robot::from_file(&cfg.robot).unwrap();
     let a = ActuatorConfig::default();
     assert!(
-        a.hook_budget_s() > HOOK_BLOCKS.as_secs_f64(),
+        a.hook_budget_ms > HOOK_BLOCKS.as_secs_f64() * 1e3,
         "the default budget covers it"
     );
     let fail = Arc::new(AtomicBool::new(false));
     let events = Arc::new(std::sync::Mutex::new(Vec::new()));
-    let arm = SlowHooksArm {
+    let arm = SlowBusArm {
         sim: SimArm::new(&robot, &a.sim, &initial_q(&robot, &a.sim)),
         fail: fail.clone(),
+        reset_blocks: HOOK_BLOCKS,
+        activate_blocks: HOOK_BLOCKS,
         events: events.clone(),
     };
     let mut c = ActuatorCore::new(arm, &robot, &cfg, &a).unwrap();
@@ -400,15 +382,15 @@ fn a_hook_blocking_longer_than_hung_ms_is_announced_before_it_runs() {
     };
     let t0 = 1000 * MS;
     // The first command activates (blocking).
-    c.accept_torque_announced(&torque(1, t0), 1, t0, || true, &mut |h| note(&events, h))
+    c.accept_torque_from(&torque(1, t0), 1, t0, || true, &mut |h| note(&events, h))
         .unwrap();
     let took = c.take_hook_ns();
     assert!(took >= HOOK_BLOCKS.as_nanos() as u64);
     let mut t = t0 + took;
     // The next ones run no hook, nor does a reset without a fault.
-    c.accept_torque_announced(&torque(2, t), 1, t, || true, &mut |h| note(&events, h))
+    c.accept_torque_from(&torque(2, t), 1, t, || true, &mut |h| note(&events, h))
         .unwrap();
-    assert!(!c.reset_announced(t, &mut |h| note(&events, h)));
+    assert!(!c.reset(t, &mut |h| note(&events, h)));
     assert_eq!(
         *events.lock().unwrap(),
         ["announce on_activate", "on_activate"]
@@ -423,14 +405,14 @@ fn a_hook_blocking_longer_than_hung_ms_is_announced_before_it_runs() {
     c.step(t);
     assert_eq!(c.lifecycle(), LifecycleState::Fault);
     events.lock().unwrap().clear();
-    assert!(c.reset_announced(t, &mut |h| note(&events, h)));
+    assert!(c.reset(t, &mut |h| note(&events, h)));
     assert_eq!(*events.lock().unwrap(), ["announce on_reset", "on_reset"]);
     t += c.take_hook_ns();
     // The activation after it, on the next fresh command, is announced too.
     events.lock().unwrap().clear();
     c.step(t);
     t += MS;
-    c.accept_torque_announced(&torque(4, t), 1, t, || true, &mut |h| note(&events, h))
+    c.accept_torque_from(&torque(4, t), 1, t, || true, &mut |h| note(&events, h))
         .unwrap();
     assert_eq!(
         *events.lock().unwrap(),
