@@ -6,7 +6,9 @@
 //!   where (q̂, q̂̇) is the measured state predicted one period ahead under q̈d
 //!   (`delay_compensation`, default on; off: q̂ = q). The measured state is the result
 //!   of the previous torque, one period older than the setpoint; without the
-//!   prediction the loop tracks about q̇·period behind.
+//!   prediction the loop tracks about q̇·period behind. It is evaluated in one
+//!   Newton-Euler pass, `τ = rnea(q, q̇, a)` with `a` the bracket, which equals
+//!   `M(q)a + h(q, q̇)` without forming M (Featherstone, RBDA §5.3).
 //! * Feedback off, or measured state stale: feed-forward Newton-Euler
 //!   `τ = rnea(qd, q̇d, q̈d)`, flagged `STATE_STALE` when feedback was wanted.
 //! * Every τ is clamped to the joint's effort limit and flagged `CLAMPED`.
@@ -33,7 +35,7 @@ pub use stage::run;
 use microrobot_messages::{
     Header, JointSetpoint, JointState, MAX_JOINTS, TorqueCommand, state_flags, torque_flags,
 };
-use microrobot_model::{JointVector, ModelData, Robot, mass_matrix, nonlinear_effects, rnea};
+use microrobot_model::{JointVector, ModelData, Robot, rnea};
 use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::validate::{
     JointBounds, Refusal, SeqTracker, check_fresh, check_setpoint, check_state,
@@ -281,9 +283,7 @@ impl DynamicsCore {
                     let vp = v[i] + ad[i] * h;
                     a[i] = ad[i] + self.kp * (qd_[i] - qp) + self.kd * (vd[i] - vp);
                 }
-                let m = mass_matrix(&self.robot, &mut self.data, &q);
-                let h = nonlinear_effects(&self.robot, &mut self.data, &q, &v);
-                m * a + h
+                rnea(&self.robot, &mut self.data, &q, &v, &a)
             }
             None => {
                 if self.feedback {

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use microrobot_dynamics::{DynamicsConfig, DynamicsCore};
 use microrobot_messages::{Header, JointSetpoint, JointState, state_flags, torque_flags};
-use microrobot_model::{JointVector, ModelData, Robot, rnea};
+use microrobot_model::{JointVector, ModelData, Robot, mass_matrix, nonlinear_effects, rnea};
 use microrobot_runtime::config::PipelineConfig;
 
 const MS: u64 = 1_000_000;
@@ -72,6 +72,54 @@ fn on_the_setpoint_at_rest_feedback_equals_inverse_dynamics() {
     }
     assert_eq!(t.state_seq, 1);
     assert_eq!(t.q_desired[..6], Q);
+}
+
+/// Off the setpoint and moving, the torque is the computed-torque law
+/// `M(q)(q̈d + Kp(qd − q) + Kd(q̇d − q̇)) + h(q, q̇)`, here formed with the mass matrix and
+/// the nonlinear effects, which the core evaluates in one Newton-Euler pass instead.
+#[test]
+fn off_the_setpoint_feedback_is_the_computed_torque_law() {
+    let c = cfg(false);
+    let robot = Robot::from_file(&c.robot).unwrap();
+    let gains = DynamicsConfig {
+        delay_compensation: false,
+        ..DynamicsConfig::default()
+    };
+    let mut d = DynamicsCore::new(&robot, &c, &gains);
+    let now = 1000 * MS;
+    let mut s = state(1, 0, now, Q);
+    let v = [0.3, -0.2, 0.25, -0.4, 0.5, -0.6];
+    s.qd[..6].copy_from_slice(&v);
+    d.accept_state(&s, 9, 0).unwrap();
+    let q_sp = [0.101, 0.199, 0.3015, 0.398, 0.5, 0.601];
+    let (vd, ad) = (
+        [0.31, -0.21, 0.24, -0.41, 0.52, -0.58],
+        [0.5, -1.0, 0.8, 1.2, -0.7, 0.3],
+    );
+    let mut p = sp(1, now, q_sp, ad);
+    p.qd[..6].copy_from_slice(&vd);
+    let t = d.compute(&p, 1, now).unwrap();
+    assert_ne!(t.flags & torque_flags::FEEDBACK, 0);
+    assert_eq!(t.flags & torque_flags::CLAMPED, 0, "{:?}", t.tau);
+    let col = |x: [f64; 6]| {
+        JointVector::from_column_slice(&[x[0], x[1], x[2], x[3], x[4], x[5], 0.0, 0.0])
+    };
+    let (q, qdot) = (col(Q), col(v));
+    let mut a = JointVector::zeros();
+    for i in 0..6 {
+        a[i] = ad[i] + gains.kp_per_s2 * (q_sp[i] - Q[i]) + gains.kd_per_s * (vd[i] - v[i]);
+    }
+    let mut data = ModelData::new(&robot);
+    let m = mass_matrix(&robot, &mut data, &q);
+    let expected = m * a + nonlinear_effects(&robot, &mut data, &q, &qdot);
+    for i in 0..6 {
+        assert!(
+            (t.tau[i] - expected[i]).abs() <= 1e-9 * expected[i].abs().max(1.0),
+            "joint {i}: {} vs {}",
+            t.tau[i],
+            expected[i]
+        );
+    }
 }
 
 #[test]
