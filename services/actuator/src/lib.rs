@@ -93,6 +93,8 @@ pub struct ActuatorCore<B: ActuatorBackend> {
     /// After a stall: the first state published after it; commands answering an older
     /// state are not followed. `None` when no stall is pending.
     resync_state_seq: Option<u64>,
+    /// The length of the last stall (ns).
+    last_stall_ns: u64,
     /// Wall time spent inside lifecycle hooks, not yet taken by the stage.
     hook_ns: u64,
     /// Counters for the status.
@@ -176,6 +178,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
             hw_faults_counted: 0,
             last_step_ns: None,
             resync_state_seq: None,
+            last_stall_ns: 0,
             hook_ns: 0,
             counters: Counters::default(),
             tracking_error_max: [0.0; MAX_JOINTS],
@@ -268,6 +271,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         from_pipeline: impl FnOnce() -> bool,
         announce: &mut dyn FnMut(LifecycleHook),
     ) -> Result<(), Refusal> {
+        self.detect_stall(now_ns);
         let r = check_torque(msg, self.dof)
             .and_then(|()| {
                 if self.lockstep {
@@ -429,7 +433,18 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
     /// periods are not replayed: the stage drops every timer tick older than
     /// `stale_ms`. Returns the stall's length in ns. Lockstep has no stalls: logical
     /// time waits for the actuator.
+    ///
+    /// A freeze can also land inside a wake-up, after this check (SIGSTOP, a host stall
+    /// in the middle of a plant step): every accepted command and every plant step
+    /// makes the same check with its own time, so the commands queued during such a
+    /// stall are judged exactly as after one between wake-ups.
     pub fn on_wake(&mut self, now_ns: u64) -> Option<u64> {
+        self.detect_stall(now_ns)
+    }
+
+    /// The stall check of [`ActuatorCore::on_wake`]; the stall's length is also kept for
+    /// [`ActuatorCore::last_stall_ns`].
+    fn detect_stall(&mut self, now_ns: u64) -> Option<u64> {
         if self.lockstep {
             return None;
         }
@@ -439,9 +454,16 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
         }
         self.last_step_ns = Some(now_ns);
         self.counters.stalls += 1;
+        self.last_stall_ns = gap;
         self.resync_state_seq = Some(self.state_seq + 1);
         self.check_watchdog(now_ns);
         Some(gap)
+    }
+
+    /// The length of the last stall detected (ns; 0 before the first), for the log line
+    /// of a stall found inside a wake-up (`counters.stalls` tells that one was).
+    pub fn last_stall_ns(&self) -> u64 {
+        self.last_stall_ns
     }
 
     /// Whether the plant is stepped by the actuator's own timer (free-running, or the
@@ -464,6 +486,7 @@ impl<B: ActuatorBackend> ActuatorCore<B> {
     /// when no command arrived for that long).
     pub fn step(&mut self, now_ns: u64) -> JointState {
         if !self.lockstep {
+            self.detect_stall(now_ns);
             self.last_step_ns = Some(now_ns);
             if self.safety.mode() == Mode::Command
                 && self

@@ -150,9 +150,10 @@ where
             e2e: LatencyHistogram::new(),
             torque_to_taken: LatencyHistogram::new(),
             step_to_state: LatencyHistogram::new(),
-            // Free-running with the planner on its own timer, the plant steps are phased
-            // half a period after the planner's ticks (see `wake`). When the planner
-            // ticks on states, this timer is the pipeline's master clock and stays.
+            // Free-running with the planner on its own timer, each plant step runs as its
+            // torque arrives, at the latest half a period after the planner's tick (see
+            // `phase`). When the planner ticks on states, this timer is the pipeline's
+            // master clock and stays.
             phased: cfg.planner_ticks_on_states(),
             answered: u64::MAX,
             accepted: u64::MAX,
@@ -308,9 +309,10 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
             .record(monotonic_ns().saturating_sub(s.header.stamp_ns));
     }
 
-    /// Free-running: puts the plant steps half a period after the planner's ticks, so
-    /// torque k is applied in the step that ends before setpoint k+1 (the same
-    /// one-period loop delay as lockstep).
+    /// Free-running: puts the plant steps' latest time half a period after the
+    /// planner's ticks, so torque k is applied in the step that ends before setpoint
+    /// k+1 (the same one-period loop delay as lockstep), whether the torque steps it on
+    /// arrival or the timer does.
     fn phase(&mut self, ports: &Ports, cfg: &PipelineConfig, source_stamp_ns: u64, now: u64) {
         self.phased = true;
         let p = cfg.period_ns();
@@ -321,6 +323,22 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
         if ports.timer.arm_absolute(first, p).is_ok() {
             let _ = ports.timer.read_expirations();
             self.ticker = Ticker::new(first, p, cfg.realtime.overrun);
+        }
+    }
+
+    /// Free-running on the planner's clock: the plant step of this period runs as its
+    /// torque arrives, rather than on a timer wake-up of its own (one wake-up per period
+    /// instead of two). The timer stays armed at the step's latest time, half a period
+    /// after the setpoint, and wakes the actuator only when no torque came by then (the
+    /// step then holds or ramps as the watchdog says). Either way torque k is applied in
+    /// the step that ends before setpoint k+1, one step per period.
+    fn step_on_arrival(&mut self, ports: &Ports, now: u64) {
+        let timer = &ports.timer;
+        let early = self
+            .ticker
+            .take_early(now, |first, p| timer.arm_absolute(first, p).is_ok());
+        if early.is_some() {
+            self.step(ports, now);
         }
     }
 
@@ -355,6 +373,8 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
                 }
                 if !self.core.steps_on_timer() {
                     self.step(ports, now);
+                } else if !cfg.planner_ticks_on_states() {
+                    self.step_on_arrival(ports, now);
                 }
             }
             // An activation that blocked: its periods are not replayed.
@@ -454,13 +474,9 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
         let cfg = cycle.cfg;
         let mut was_latched = self.core.safe_state_latched();
         // Before any queued command can feed the watchdog: was this process stalled?
-        if let Some(gap) = self.core.on_wake(monotonic_ns()) {
-            tracing::warn!(
-                "actuator: stalled for {:.1} ms (longer than stale_ms = {} ms): the missed periods are not replayed; holding until a torque command answers a state published after the stall",
-                gap as f64 * 1e-6,
-                cfg.watchdog.stale_ms
-            );
-        }
+        // (A freeze inside this wake-up is caught by the next command or plant step.)
+        let stalls = self.core.counters.stalls;
+        self.core.on_wake(monotonic_ns());
         if ready.contains(on.torque) {
             self.take_torques(ports, cycle, &mut was_latched);
         }
@@ -469,6 +485,13 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
         self.take_commands(ports, cycle, ready.contains(on.command));
         if ready.contains(on.timer) {
             self.on_timer(ports, cfg);
+        }
+        if self.core.counters.stalls != stalls {
+            tracing::warn!(
+                "actuator: stalled for {:.1} ms (longer than stale_ms = {} ms): the missed periods are not replayed; holding until a torque command answers a state published after the stall",
+                self.core.last_stall_ns() as f64 * 1e-6,
+                cfg.watchdog.stale_ms
+            );
         }
         if self.core.safe_state_latched() && !was_latched {
             tracing::warn!(

@@ -69,13 +69,19 @@ fn missing_commands_hold_then_latch_until_reset() {
     let (mut c, _) = core();
     let t0 = 1000 * MS;
     c.accept_torque(&torque(1, t0), 1, t0).unwrap();
-    c.step(t0);
-    c.check_watchdog(t0 + 60 * MS);
-    let s = c.step(t0 + 60 * MS);
+    // The plant steps every period (a gap longer than stale_ms would be a stall).
+    let step_until = |c: &mut ActuatorCore<_>, from: u64, to: u64| {
+        let mut s = None;
+        for now in (from..=to).step_by(MS as usize) {
+            c.check_watchdog(now);
+            s = Some(c.step(now));
+        }
+        s.expect("at least one step")
+    };
+    let s = step_until(&mut c, t0, t0 + 60 * MS);
     assert_ne!(s.flags & state_flags::COMMAND_STALE, 0);
     assert!(!c.safe_state_latched());
-    c.check_watchdog(t0 + 250 * MS);
-    let s = c.step(t0 + 250 * MS);
+    let s = step_until(&mut c, t0 + 61 * MS, t0 + 250 * MS);
     assert!(c.safe_state_latched());
     assert_ne!(s.flags & state_flags::SAFE_STATE, 0);
     assert_eq!(s.lifecycle, LifecycleState::Fault as u32);
@@ -194,6 +200,49 @@ fn a_stall_longer_than_fault_ms_latches_the_safe_state_before_queued_commands_co
     let s = c.step(wake);
     assert_ne!(s.flags & state_flags::SAFE_STATE, 0);
     assert_ne!(s.flags & state_flags::STALLED, 0);
+}
+
+/// A freeze that lands inside a wake-up, after its stall check (SIGSTOP in the middle
+/// of a plant step): the commands the dynamics queued meanwhile are stamped fresh, and
+/// the next wake-up's check would come after they fed the watchdog and drove the plant.
+/// The first command or step after the freeze judges it instead, as `on_wake` would.
+#[test]
+fn a_stall_inside_a_wake_up_is_caught_by_the_next_command_or_step() {
+    for first_after in ["command", "step"] {
+        let (mut c, _) = core();
+        let t0 = 1000 * MS;
+        c.accept_torque(&answering(1, t0, 0), 1, t0).unwrap();
+        c.check_watchdog(t0);
+        let s = c.step(t0);
+        // Frozen 2 s right after that step; no `on_wake` before what comes next.
+        let resumed = t0 + 2000 * MS;
+        let queued = answering(2, resumed - MS, s.header.seq);
+        if first_after == "command" {
+            assert!(
+                c.accept_torque(&queued, 1, resumed).is_err(),
+                "{first_after}"
+            );
+        } else {
+            let s = c.step(resumed);
+            assert_ne!(s.flags & state_flags::STALLED, 0, "{first_after}");
+            assert!(
+                c.accept_torque(&queued, 1, resumed).is_err(),
+                "{first_after}"
+            );
+        }
+        assert_eq!(c.counters.stalls, 1, "{first_after}");
+        assert_eq!(c.last_stall_ns(), 2000 * MS, "{first_after}");
+        assert!(
+            c.safe_state_latched(),
+            "{first_after}: 2 s without commands"
+        );
+        let s = c.step(resumed);
+        assert_ne!(s.flags & state_flags::SAFE_STATE, 0, "{first_after}");
+        assert_ne!(s.flags & state_flags::STALLED, 0, "{first_after}");
+        // Counted once: the wake-up's own check finds nothing more.
+        assert_eq!(c.on_wake(resumed + MS), None, "{first_after}");
+        assert_eq!(c.counters.stalls, 1, "{first_after}");
+    }
 }
 
 #[test]
