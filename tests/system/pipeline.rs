@@ -144,8 +144,6 @@ fn lockstep_runs_are_bit_identical() {
     let ((a, sa), (b, sb)) = (record("repro-a"), record("repro-b"));
     // The services saw every message: their own figures must repeat exactly. (Cycle
     // counts do not: the pipeline holds after the program until the supervisor stops it.)
-    // (Cycle counts do not repeat: the pipeline holds after the program until the
-    // supervisor stops it.)
     for key in ["tracking_error_max_rad", "peak_torque_nm"] {
         assert_eq!(sa[key], sb[key], "{key}");
     }
