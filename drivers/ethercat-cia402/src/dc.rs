@@ -55,9 +55,250 @@ pub const fn sync_mode_supported(supported: u16, mode: u16) -> bool {
     }
 }
 
+/// Most exchanges one correction window holds.
+const WINDOW: usize = 128;
+/// How long one correction window lasts (its exchange count is this over the period,
+/// 8 to [`WINDOW`]).
+const WINDOW_NS: u64 = 100_000_000;
+
+/// The phase of the cyclic exchange against SYNC0, measured on every exchange and kept
+/// at a margin.
+///
+/// The margin is how early the outputs reach the drives before SYNC0 latches them
+/// (ETG.1020 DC synchronous mode: outputs written after SYNC0 miss it, an SM-event
+/// missed). It is read from the DC system time the reference clock puts into each
+/// exchange's frame as the frame passes it (ethercrab's `CycleInfo::dc_system_time`),
+/// against the SYNC0 grid (`sync0_phase_ns + k·period` in DC system time; ethercrab
+/// rounds the SYNC0 start to whole periods, so its phase is 0).
+///
+/// The exchange's place in the period is the pipeline's (the actuator steps on the
+/// host's monotonic clock), so the SYNC0 grid is moved to it, not the other way round:
+/// every window (~100 ms) the median margin error is taken and the DC system time is
+/// to be advanced by it ([`PhaseLock::on_exchange`] returns the shift; the master
+/// writes it into the reference clock, see `master::Bus`). An error beyond the lock
+/// window (period / 8) is taken at once (acquisition: the first window of a run, or a
+/// pipeline that restarted its timer); a smaller one by at most period / 50 per window
+/// (200 ppm at any period), which follows the reference clock's drift against the host
+/// (a crystal's, tens of ppm) without a step. ethercrab 0.7.1 keeps the SubDevices on
+/// the reference clock (FRMW in `tx_rx_dc`) but offers nothing that keeps the
+/// reference clock on the host, nor a SYNC0 shift on the SubDevices (its
+/// `sync0_shift` only enters `next_cycle_wait`, for a master that times itself on DC):
+/// hence this by hand.
+#[derive(Debug, Clone)]
+pub struct PhaseLock {
+    period_ns: u64,
+    sync0_phase_ns: u64,
+    target_ns: u64,
+    errors: [i64; WINDOW],
+    n: usize,
+    interval: usize,
+    locked: bool,
+    stats: PhaseStats,
+}
+
+/// What [`PhaseLock`] measured (ns).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PhaseStats {
+    /// Exchanges measured.
+    pub samples: u64,
+    /// The wanted margin: SYNC0 this long after the frame reaches the drives.
+    pub target_margin_ns: u64,
+    /// Margin of the last exchange.
+    pub last_margin_ns: u64,
+    /// Median margin of the last full window.
+    pub window_median_margin_ns: u64,
+    /// Smallest margin since the last acquisition (`u64::MAX` before any).
+    pub min_margin_ns: u64,
+    /// Largest margin since the last acquisition.
+    pub max_margin_ns: u64,
+    /// Exchanges while locked that reached the drives after the SYNC0 they were meant
+    /// for (more than halfway from the target to the next SYNC0 after it): outputs a
+    /// drive took a cycle late.
+    pub late: u64,
+    /// Shifts of the DC system time asked for, and their sum.
+    pub corrections: u64,
+    /// Of them, acquisitions (an error beyond the lock window, taken at once).
+    pub acquisitions: u64,
+    /// Sum of all shifts (ns, positive: DC system time advanced, SYNC0 earlier).
+    pub shifted_ns: i64,
+    /// The shift of the last acquisition.
+    pub last_acquisition_ns: i64,
+}
+
+impl PhaseLock {
+    /// SYNC0 every `period_ns` at `sync0_phase_ns` (mod period) in DC system time, to
+    /// fall `target_margin_ns` after each exchange's arrival (clamped into the period).
+    pub fn new(period_ns: u64, sync0_phase_ns: u64, target_margin_ns: u64) -> PhaseLock {
+        let period_ns = period_ns.max(1);
+        let target_ns = target_margin_ns.clamp(1, period_ns.saturating_sub(1).max(1));
+        PhaseLock {
+            period_ns,
+            sync0_phase_ns: sync0_phase_ns % period_ns,
+            target_ns,
+            errors: [0; WINDOW],
+            n: 0,
+            interval: usize::try_from(WINDOW_NS / period_ns)
+                .unwrap_or(WINDOW)
+                .clamp(8, WINDOW),
+            locked: false,
+            stats: PhaseStats {
+                target_margin_ns: target_ns,
+                min_margin_ns: u64::MAX,
+                ..PhaseStats::default()
+            },
+        }
+    }
+
+    /// Time from DC system time `dc_ns` to the next SYNC0 (0 = at it), in [0, period).
+    pub fn margin_ns(&self, dc_ns: u64) -> u64 {
+        let p = self.period_ns;
+        (self.sync0_phase_ns + p - dc_ns % p) % p
+    }
+
+    /// `margin - target`, wrapped into [-period/2, period/2).
+    fn error_ns(&self, margin_ns: u64) -> i64 {
+        let p = self.period_ns;
+        let e = ((margin_ns + p - self.target_ns) % p) as i64;
+        if e >= (p / 2) as i64 { e - p as i64 } else { e }
+    }
+
+    /// One exchange whose frame passed the reference clock at DC system time `dc_ns`.
+    /// Returns, once per window, the shift (ns) to advance the DC system time by
+    /// (positive: SYNC0 comes earlier against the host). No allocation, no lock.
+    pub fn on_exchange(&mut self, dc_ns: u64) -> Option<i64> {
+        let m = self.margin_ns(dc_ns);
+        let e = self.error_ns(m);
+        let st = &mut self.stats;
+        st.samples += 1;
+        st.last_margin_ns = m;
+        if self.locked {
+            st.min_margin_ns = st.min_margin_ns.min(m);
+            st.max_margin_ns = st.max_margin_ns.max(m);
+            if m > self.target_ns + (self.period_ns - self.target_ns) / 2 {
+                st.late += 1;
+            }
+        }
+        self.errors[self.n] = e;
+        self.n += 1;
+        if self.n < self.interval {
+            return None;
+        }
+        let w = &mut self.errors[..self.n];
+        let mid = w.len() / 2;
+        let (_, median, _) = w.select_nth_unstable(mid);
+        let median = *median;
+        self.n = 0;
+        st.window_median_margin_ns = (self.target_ns as i64 + median) as u64;
+        let p = self.period_ns as i64;
+        let shift = if median.abs() > p / 8 {
+            st.acquisitions += 1;
+            st.last_acquisition_ns = median;
+            // The extremes are those of the phase from here on.
+            st.min_margin_ns = u64::MAX;
+            st.max_margin_ns = 0;
+            median
+        } else {
+            median.clamp(-(p / 50).max(1), (p / 50).max(1))
+        };
+        self.locked = true;
+        if shift == 0 {
+            return None;
+        }
+        st.corrections += 1;
+        st.shifted_ns += shift;
+        Some(shift)
+    }
+
+    /// What was measured so far.
+    pub fn stats(&self) -> PhaseStats {
+        self.stats
+    }
+
+    /// Whether a window has been taken (the phase was set at least once).
+    pub fn locked(&self) -> bool {
+        self.locked
+    }
+
+    /// The period (ns).
+    pub fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn margin_is_the_time_to_the_next_sync0() {
+        let p = PhaseLock::new(1_000_000, 0, 500_000);
+        assert_eq!(p.margin_ns(10_000_000), 0, "at SYNC0");
+        assert_eq!(p.margin_ns(10_000_001), 999_999);
+        assert_eq!(p.margin_ns(10_700_000), 300_000);
+        let p = PhaseLock::new(1_000_000, 250_000, 500_000);
+        assert_eq!(p.margin_ns(10_000_000), 250_000);
+        assert_eq!(p.error_ns(500_000), 0);
+        assert_eq!(p.error_ns(100_000), -400_000);
+        assert_eq!(p.error_ns(950_000), 450_000);
+        assert_eq!(p.error_ns(0), -500_000, "wrapped");
+    }
+
+    /// Exchanges every period at host time `t`, DC = host + `offset`; the shifts
+    /// returned are applied to the offset as the master applies them.
+    fn run(lock: &mut PhaseLock, offset: &mut i64, t0: u64, n: u64, drift_ppm: i64) -> u64 {
+        let p = lock.period_ns();
+        let mut t = t0;
+        for _ in 0..n {
+            let dc = (t as i64 + *offset + (t - t0) as i64 * drift_ppm / 1_000_000) as u64;
+            if let Some(s) = lock.on_exchange(dc) {
+                *offset += s;
+            }
+            t += p;
+        }
+        t
+    }
+
+    #[test]
+    fn the_first_window_acquires_the_phase_and_drift_is_followed() {
+        let period = 1_000_000;
+        let mut lock = PhaseLock::new(period, 0, 300_000);
+        // Exchanges 0.9 ms after SYNC0: a margin of 0.1 ms.
+        let mut offset = -100_000i64;
+        let t = run(&mut lock, &mut offset, 1_000_000_000, 100, 0);
+        let st = lock.stats();
+        assert_eq!(st.acquisitions, 1);
+        assert_eq!(
+            st.last_acquisition_ns, -200_000,
+            "DC back 0.2 ms: SYNC0 later"
+        );
+        assert_eq!(lock.margin_ns((t as i64 + offset) as u64), 300_000);
+        // 150 ppm of drift for 5 s: followed within one window's slew, no acquisition.
+        let t = run(&mut lock, &mut offset, t, 5000, 150);
+        let st = lock.stats();
+        assert_eq!(st.acquisitions, 1, "{st:?}");
+        assert_eq!(st.late, 0);
+        // Within about a window's drift (15 µs) of the target, the median lagging.
+        let err = st.last_margin_ns as i64 - 300_000;
+        assert!(err.abs() <= 40_000, "{st:?}");
+        assert!(
+            st.min_margin_ns >= 260_000 && st.max_margin_ns <= 340_000,
+            "{st:?}"
+        );
+        let _ = t;
+    }
+
+    #[test]
+    fn an_exchange_past_its_sync0_counts_as_late() {
+        let mut lock = PhaseLock::new(1_000_000, 0, 500_000);
+        let mut offset = -500_000i64;
+        let t = run(&mut lock, &mut offset, 0, 100, 0);
+        assert!(lock.locked());
+        // 0.6 ms late: 0.1 ms after the SYNC0 it was meant for.
+        let dc = (t as i64 + offset + 600_000) as u64;
+        lock.on_exchange(dc);
+        assert_eq!(lock.stats().late, 1);
+        assert_eq!(lock.stats().last_margin_ns, 900_000);
+    }
 
     #[test]
     fn supported_modes_follow_the_bit_field() {
