@@ -347,16 +347,19 @@ fn log_sync(bus: &Bus, file: &DriveFile) {
         return;
     };
     tracing::info!(
-        "EtherCAT DC: {} exchanges measured; margin to SYNC0 (target {} µs) last {} µs, while locked {}..{} µs; {} reached the drives after their SYNC0; {} phase corrections ({} acquisitions), {} µs in all",
+        "EtherCAT DC: {} exchanges measured; margin to SYNC0 (target {} µs) last {} µs, {}; {} reached the drives after their SYNC0; {} phase corrections ({} acquisitions), {} µs in all",
         p.samples,
         p.target_margin_ns / 1000,
         p.last_margin_ns / 1000,
         if p.min_margin_ns == u64::MAX {
-            0
+            "no window completed".to_string()
         } else {
-            p.min_margin_ns / 1000
+            format!(
+                "since the last acquisition {}..{} µs",
+                p.min_margin_ns / 1000,
+                p.max_margin_ns / 1000
+            )
         },
-        p.max_margin_ns / 1000,
         p.late,
         p.corrections,
         p.acquisitions,

@@ -693,15 +693,29 @@ impl Bus {
                     )
                     .await
                     .map_err(state("distributed clocks"))?;
+                // The first SYNC0 (system time, as ethercrab rounded it), read back from
+                // the reference clock: bring-up ends once SYNC0 runs, so the drives
+                // take outputs from the first cycle of the pipeline on.
+                let sync0_start = match dc_reference {
+                    Some(r) => group
+                        .subdevice(md, r)
+                        .map_err(state("distributed clocks"))?
+                        .register_read::<u64>(0x0990u16)
+                        .await
+                        .map_err(state("distributed clocks"))?,
+                    None => 0,
+                };
                 let group = group.into_safe_op(md).await.map_err(state("SAFE-OP"))?;
                 let group = group.request_into_op(md).await.map_err(state("OP"))?;
                 // With SYNC0 running, the SubDevices reach OP only while process data
-                // flows: cycle until they are all there.
+                // flows: cycle until they are all there and SYNC0 has run two cycles.
                 let start = Instant::now();
                 loop {
                     let r = group.tx_rx_dc(md).await.map_err(state("OP"))?;
                     phase.on_exchange(r.extra.dc_system_time);
-                    if r.all_op() {
+                    let sync0_runs =
+                        r.extra.dc_system_time >= sync0_start.saturating_add(2 * period_ns);
+                    if r.all_op() && sync0_runs {
                         break;
                     }
                     if start.elapsed() > timeouts().state_transition {
@@ -876,7 +890,7 @@ impl Bus {
             tracing::info!(
                 "EtherCAT DC: SYNC0 moved onto the exchanges: DC system time shifted by {} µs (median margin was {} µs, target {} µs)",
                 shift as f64 / 1000.0,
-                st.target_margin_ns as i64 + st.last_acquisition_ns,
+                (st.target_margin_ns as i64 + st.last_acquisition_ns) / 1000,
                 st.target_margin_ns / 1000
             );
         }

@@ -407,16 +407,20 @@ impl Chain {
         matches!(self.time, TimeMode::WallClock { .. })
     }
 
-    /// Runs the SYNC0 events up to `now` ([`SubDevice::sync0_events`]) and, if any drive
-    /// had one, steps the drives and the plant once: a drive synchronised to SYNC0
-    /// applies its targets at SYNC0, not at the frame's arrival.
+    /// Runs the SYNC0 events up to `now` ([`SubDevice::sync0_events`]) and, if a drive
+    /// took new outputs at one, steps the drives and the plant once: a drive
+    /// synchronised to SYNC0 applies its targets at SYNC0, not at the frame's arrival.
+    /// SYNC0 events without new outputs are counted, not stepped: as without DC, a
+    /// paused master does not make the arm move (one step per exchange, as before).
     fn sync0(&mut self, now: u64) {
         if !self.sync0_latching() {
             return;
         }
         let mut any = false;
         for (i, s) in self.subs.iter_mut().enumerate() {
-            any |= s.sync0_events(now + HOP_NS * i as u64) > 0;
+            let before = s.sync0_latched;
+            s.sync0_events(now + HOP_NS * i as u64);
+            any |= s.sync0_latched > before;
         }
         if any {
             self.step();
