@@ -75,7 +75,7 @@ const WINDOW_NS: u64 = 100_000_000;
 /// host's monotonic clock), so the SYNC0 grid is moved to it, not the other way round:
 /// every window (~100 ms) the median margin error is taken and the DC system time is
 /// to be advanced by it ([`PhaseLock::on_exchange`] returns the shift; the master
-/// writes it into the reference clock, see `master::Bus`). An error beyond the lock
+/// adds it to the reference clock's system time offset, see `master::Bus`). An error beyond the lock
 /// window (period / 8) is taken at once (acquisition: the first window of a run, or a
 /// pipeline that restarted its timer); a smaller one by at most period / 50 per window
 /// (200 ppm at any period), which follows the reference clock's drift against the host

@@ -506,9 +506,10 @@ pub struct Bus {
     exchange_timeout: Duration,
     waker: Option<(ThreadId, Waker)>,
     dc: bool,
-    /// With DC: the phase of the exchange against SYNC0, and the bus position of the
-    /// reference clock (the first SubDevice with DC, as ethercrab picks it).
-    phase: Option<(PhaseLock, usize)>,
+    /// With DC: the phase of the exchange against SYNC0, the bus position of the
+    /// reference clock (the first SubDevice with DC, as ethercrab picks it)
+    /// and the system time offset (0x0920) last written to it.
+    phase: Option<(PhaseLock, usize, u64)>,
 }
 
 /// Options of [`Bus::bring_up_with`].
@@ -585,7 +586,7 @@ impl Bus {
         let mut phase = PhaseLock::new(period_ns, 0, margin_ns);
         let mut dc_reference = None;
         let md = &transport.maindevice;
-        let (group, dc) = async_io::block_on(async {
+        let (group, reference_offset) = async_io::block_on(async {
             let mut group: Group<PreOp> = md
                 .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercrab::std::ethercat_now)
                 .await
@@ -726,11 +727,22 @@ impl Bus {
                     }
                     async_io::Timer::after(period).await;
                 }
-                Ok((OpGroup::Dc(group), true))
+                // The reference clock's system time offset, which the phase is kept
+                // with (`Bus::keep_phase`).
+                let offset = match dc_reference {
+                    Some(r) => group
+                        .subdevice(md, r)
+                        .map_err(state("distributed clocks"))?
+                        .register_read::<u64>(0x0920u16)
+                        .await
+                        .map_err(state("distributed clocks"))?,
+                    None => 0,
+                };
+                Ok((OpGroup::Dc(group), Some(offset)))
             } else {
                 let group = group.into_safe_op(md).await.map_err(state("SAFE-OP"))?;
                 let group = group.into_op(md).await.map_err(state("OP"))?;
-                Ok((OpGroup::Free(group), false))
+                Ok((OpGroup::Free(group), None))
             }
         })?;
         let mut images = Vec::with_capacity(file.axes.len());
@@ -750,8 +762,9 @@ impl Bus {
             }
             images.push((inputs, outputs));
         }
-        let phase = match (dc, dc_reference) {
-            (true, Some(r)) => {
+        let dc = reference_offset.is_some();
+        let phase = match (reference_offset, dc_reference) {
+            (Some(offset), Some(r)) => {
                 let st = phase.stats();
                 tracing::info!(
                     "EtherCAT DC: SYNC0 every {} µs, sync mode DC SYNC0 (0x1C32:01 = 2) on every DC drive, reference clock at bus position {r}; SYNC0 is to fall {} µs after the frame reaches the drives and is moved onto the pipeline's exchanges in their first ~100 ms (the bring-up's own exchanges had a margin of {} µs)",
@@ -759,7 +772,7 @@ impl Bus {
                     st.target_margin_ns / 1000,
                     st.last_margin_ns / 1000,
                 );
-                Some((PhaseLock::new(period_ns, 0, margin_ns), r))
+                Some((PhaseLock::new(period_ns, 0, margin_ns), r, offset))
             }
             _ => None,
         };
@@ -807,8 +820,7 @@ impl Bus {
     /// (plus one AL status read when a SubDevice left OP).
     pub fn exchange(&mut self) -> Result<(), CycleError> {
         let waker = self.waker();
-        let sent = Instant::now();
-        let deadline = sent + self.exchange_timeout;
+        let deadline = Instant::now() + self.exchange_timeout;
         let md = &self.transport.maindevice;
         let guard = self.transport.frame_guard.as_deref();
         let resp = match &self.group {
@@ -829,7 +841,7 @@ impl Bus {
             Some(Ok(r)) => r,
         };
         if let Some(dc_ns) = resp.dc_ns {
-            self.keep_phase(dc_ns, sent, deadline, &waker);
+            self.keep_phase(dc_ns, deadline, &waker);
         }
         if let Some(position) = resp.not_op {
             // The cycle fails anyway: the AL status code that says why is worth waiting
@@ -850,17 +862,17 @@ impl Bus {
         Ok(())
     }
 
-    /// Measures the exchange whose frame passed the reference clock at `dc_ns` (sent at
-    /// `sent`) and, once per window, moves the SYNC0 grid onto the exchanges
-    /// ([`PhaseLock`]): the DC system time of the reference clock is written (FPWR
-    /// 0x0910) as it will be when the write arrives plus the shift; the other clocks
-    /// follow it through the FRMW of every exchange. Both frames take the same way, so
-    /// `dc_ns + (now - sent)` is the reference clock's time at the write's arrival. On
-    /// an ESC, a write of 0x0910 feeds its drift control loop (ETG.1000.4 9.2), which
-    /// slews the clock there rather than stepping it. Bounded by the exchange's
-    /// deadline; a write that fails is made up for by the next window.
-    fn keep_phase(&mut self, dc_ns: u64, sent: Instant, deadline: Instant, waker: &Waker) {
-        let Some((lock, reference)) = self.phase.as_mut() else {
+    /// Measures the exchange whose frame passed the reference clock at `dc_ns` and, once
+    /// per window, moves the SYNC0 grid onto the exchanges ([`PhaseLock`]): the shift is
+    /// added to the reference clock's system time offset (FPWR 0x0920, ETG.1000.4 9.1),
+    /// which steps its system time; the other clocks follow it through the FRMW of
+    /// every exchange (their drift control, ETG.1000.4 9.2). The offset is the one read
+    /// at bring-up plus every shift since, so the write does not depend on how long the
+    /// frame takes (an absolute system time written to 0x0910 did: on the loaded host
+    /// the write's own latency, hundreds of µs, went into the phase). Bounded by the
+    /// exchange's deadline; a write that fails is repeated with the next window's.
+    fn keep_phase(&mut self, dc_ns: u64, deadline: Instant, waker: &Waker) {
+        let Some((lock, reference, offset)) = self.phase.as_mut() else {
             return;
         };
         let acquisitions = lock.stats().acquisitions;
@@ -869,6 +881,8 @@ impl Bus {
         };
         let st = lock.stats();
         let reference = *reference;
+        *offset = offset.wrapping_add_signed(shift);
+        let value = *offset;
         let md = &self.transport.maindevice;
         let guard = self.transport.frame_guard.as_deref();
         let Some(OpGroup::Dc(g)) = &self.group else {
@@ -877,10 +891,8 @@ impl Bus {
         let Ok(sd) = g.subdevice(md, reference) else {
             return;
         };
-        let elapsed = Instant::now().saturating_duration_since(sent).as_nanos() as u64;
-        let value = dc_ns.wrapping_add(elapsed).wrapping_add_signed(shift);
         let _ = poll_until(
-            async move { sd.register_write(0x0910u16, value).await },
+            async move { sd.register_write(0x0920u16, value).await },
             deadline,
             waker,
             guard,
@@ -898,7 +910,7 @@ impl Bus {
 
     /// With DC: the phase of the exchanges against SYNC0 so far.
     pub fn phase(&self) -> Option<PhaseStats> {
-        self.phase.as_ref().map(|(l, _)| l.stats())
+        self.phase.as_ref().map(|(l, _, _)| l.stats())
     }
 
     /// With DC: 0x1C32:0B (SM-event missed) and 0x1C32:20 (sync error) of every axis,
