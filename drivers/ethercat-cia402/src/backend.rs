@@ -351,14 +351,21 @@ fn log_sync(bus: &Bus, file: &DriveFile) {
         p.samples,
         p.target_margin_ns / 1000,
         p.last_margin_ns / 1000,
-        if p.min_margin_ns == u64::MAX {
-            "no window completed".to_string()
-        } else {
-            format!(
-                "since the last acquisition {}..{} µs",
+        match (
+            p.margin_quantile_ns(0.01),
+            p.margin_quantile_ns(0.5),
+            p.margin_quantile_ns(0.99),
+        ) {
+            (Some(p1), Some(p50), Some(p99)) => format!(
+                "since the last acquisition {}..{} µs (p1 {} / p50 {} / p99 {} µs, to {} µs)",
                 p.min_margin_ns / 1000,
-                p.max_margin_ns / 1000
-            )
+                p.max_margin_ns / 1000,
+                p1 / 1000,
+                p50 / 1000,
+                p99 / 1000,
+                p.period_ns / 1000 / crate::dc::MARGIN_BUCKETS as u64
+            ),
+            _ => "no window completed".to_string(),
         },
         p.late,
         p.corrections,

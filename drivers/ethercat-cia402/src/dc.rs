@@ -96,8 +96,11 @@ pub struct PhaseLock {
     stats: PhaseStats,
 }
 
+/// Buckets of the margin histogram (each period / `MARGIN_BUCKETS` wide).
+pub const MARGIN_BUCKETS: usize = 50;
+
 /// What [`PhaseLock`] measured (ns).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PhaseStats {
     /// Exchanges measured.
     pub samples: u64,
@@ -123,6 +126,52 @@ pub struct PhaseStats {
     pub shifted_ns: i64,
     /// The shift of the last acquisition.
     pub last_acquisition_ns: i64,
+    /// Margins since the last acquisition: bucket `i` counts margins in
+    /// `[i, i + 1) · period / MARGIN_BUCKETS`.
+    pub margin_histogram: [u64; MARGIN_BUCKETS],
+    /// The period (ns).
+    pub period_ns: u64,
+}
+
+impl Default for PhaseStats {
+    fn default() -> PhaseStats {
+        PhaseStats {
+            samples: 0,
+            target_margin_ns: 0,
+            last_margin_ns: 0,
+            window_median_margin_ns: 0,
+            min_margin_ns: u64::MAX,
+            max_margin_ns: 0,
+            late: 0,
+            corrections: 0,
+            acquisitions: 0,
+            shifted_ns: 0,
+            last_acquisition_ns: 0,
+            margin_histogram: [0; MARGIN_BUCKETS],
+            period_ns: 0,
+        }
+    }
+}
+
+impl PhaseStats {
+    /// The margin under which fraction `q` (0..=1) of the margins since the last
+    /// acquisition lie, to a bucket's width (the bucket's upper edge); `None` without
+    /// any.
+    pub fn margin_quantile_ns(&self, q: f64) -> Option<u64> {
+        let n: u64 = self.margin_histogram.iter().sum();
+        if n == 0 {
+            return None;
+        }
+        let want = ((q.clamp(0.0, 1.0) * n as f64).ceil() as u64).max(1);
+        let mut seen = 0;
+        for (i, c) in self.margin_histogram.iter().enumerate() {
+            seen += c;
+            if seen >= want {
+                return Some((i as u64 + 1) * self.period_ns / MARGIN_BUCKETS as u64);
+            }
+        }
+        Some(self.period_ns)
+    }
 }
 
 impl PhaseLock {
@@ -143,7 +192,7 @@ impl PhaseLock {
             locked: false,
             stats: PhaseStats {
                 target_margin_ns: target_ns,
-                min_margin_ns: u64::MAX,
+                period_ns,
                 ..PhaseStats::default()
             },
         }
@@ -174,6 +223,10 @@ impl PhaseLock {
         if self.locked {
             st.min_margin_ns = st.min_margin_ns.min(m);
             st.max_margin_ns = st.max_margin_ns.max(m);
+            let b = (m * MARGIN_BUCKETS as u64 / self.period_ns) as usize;
+            if let Some(c) = st.margin_histogram.get_mut(b.min(MARGIN_BUCKETS - 1)) {
+                *c += 1;
+            }
             if m > self.target_ns + (self.period_ns - self.target_ns) / 2 {
                 st.late += 1;
             }
@@ -193,9 +246,10 @@ impl PhaseLock {
         let shift = if median.abs() > p / 8 {
             st.acquisitions += 1;
             st.last_acquisition_ns = median;
-            // The extremes are those of the phase from here on.
+            // The extremes and the histogram are those of the phase from here on.
             st.min_margin_ns = u64::MAX;
             st.max_margin_ns = 0;
+            st.margin_histogram = [0; MARGIN_BUCKETS];
             median
         } else {
             median.clamp(-(p / 50).max(1), (p / 50).max(1))
@@ -284,6 +338,10 @@ mod tests {
             st.min_margin_ns >= 260_000 && st.max_margin_ns <= 340_000,
             "{st:?}"
         );
+        // 20 µs buckets: the median within a bucket or two of the target.
+        let p50 = st.margin_quantile_ns(0.5).expect("samples");
+        assert!((280_000..=320_000).contains(&p50), "{p50}");
+        assert!(st.margin_quantile_ns(0.0).expect("samples") >= 260_000);
         let _ = t;
     }
 
