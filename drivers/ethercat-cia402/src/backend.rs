@@ -469,7 +469,9 @@ impl ActuatorBackend for EthercatBackend {
         self.set_targets(Target::Disabled);
         let _ = self.run_until(DISABLE_TIMEOUT, true, |a| a.iter().all(disabled));
         if let Some(mut bus) = self.bus.take() {
-            log_sync(&bus, &self.file);
+            if !self.bus_fault {
+                log_sync(&bus, &self.file);
+            }
             bus.shut_down();
         }
     }

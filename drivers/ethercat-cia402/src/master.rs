@@ -915,16 +915,22 @@ impl Bus {
 
     /// With DC: 0x1C32:0B (SM-event missed) and 0x1C32:20 (sync error) of every axis,
     /// read over SDO (not cyclic: at shut-down or after a fault); `None` for an axis
-    /// whose read failed (or a drive without them).
+    /// whose read failed (or a drive without them) and for every axis after it.
     pub fn sync_counters(&self) -> Vec<Option<SyncCounters>> {
         let md = &self.transport.maindevice;
         let Some(OpGroup::Dc(g)) = &self.group else {
             return Vec::new();
         };
+        // A drive that does not answer ends the reads: the bus is likely gone, and each
+        // read would wait out ethercrab's mailbox timeout.
+        let mut answering = true;
         (0..self.axes)
             .map(|i| {
+                if !answering {
+                    return None;
+                }
                 let sd = g.subdevice(md, i).ok()?;
-                async_io::block_on(async {
+                let c = async_io::block_on(async {
                     let missed = sd
                         .sdo_read::<u16>(SM_OUTPUT_PARAMETER, sub::SM_EVENT_MISSED)
                         .await
@@ -937,7 +943,9 @@ impl Bus {
                         sm_event_missed: missed,
                         sync_error: error != 0,
                     })
-                })
+                });
+                answering = c.is_some();
+                c
             })
             .collect()
     }

@@ -420,6 +420,18 @@ mod tests {
         assert_eq!(c.drives[0].identity.vendor_id, 0x42);
         assert_eq!(c.drives[1].gear_ratio, 10.0);
         assert_eq!(c.time, TimeMode::PerExchange { cycle_s: 0.002 });
+        assert_eq!(c.dc_drift_ppm, 0.0);
+        assert_eq!(c.drives[0].min_cycle_time_ns, DEFAULT_MIN_CYCLE_TIME_NS);
+        let c = ChainConfig::from_toml_str(
+            "dc_drift_ppm = -40.0\n[[drive]]\nmin_cycle_time_ns = 250000\ncalc_copy_time_ns = 5000\n",
+            "t.toml",
+        )
+        .expect("valid");
+        assert_eq!(c.dc_drift_ppm, -40.0);
+        assert_eq!(
+            (c.drives[0].min_cycle_time_ns, c.drives[0].calc_copy_time_ns),
+            (250_000, 5_000)
+        );
     }
 
     #[test]
@@ -444,5 +456,11 @@ mod tests {
         assert!(e.message.contains("drivez"), "{e}");
         let e = ChainConfig::from_toml_str("drives = 0\n", "t.toml").expect_err("empty");
         assert_eq!(e.key, "drive");
+        let e = ChainConfig::from_toml_str("drives = 1\ndc_drift_ppm = 5000.0\n", "t.toml")
+            .expect_err("drift");
+        assert_eq!(e.key, "dc_drift_ppm");
+        let e = ChainConfig::from_toml_str("[[drive]]\nmin_cycle_time_ns = 0\n", "t.toml")
+            .expect_err("zero minimum cycle");
+        assert_eq!(e.key, "drive[0].min_cycle_time_ns");
     }
 }
