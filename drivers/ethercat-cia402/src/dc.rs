@@ -241,7 +241,8 @@ impl PhaseLock {
         let (_, median, _) = w.select_nth_unstable(mid);
         let median = *median;
         self.n = 0;
-        st.window_median_margin_ns = (self.target_ns as i64 + median) as u64;
+        st.window_median_margin_ns =
+            (self.target_ns as i64 + median).rem_euclid(self.period_ns as i64) as u64;
         let p = self.period_ns as i64;
         let shift = if median.abs() > p / 8 {
             st.acquisitions += 1;
@@ -343,6 +344,18 @@ mod tests {
         assert!((280_000..=320_000).contains(&p50), "{p50}");
         assert!(st.margin_quantile_ns(0.0).expect("samples") >= 260_000);
         let _ = t;
+    }
+
+    #[test]
+    fn the_window_median_is_a_margin_in_the_period() {
+        // Target 0.1 ms, exchanges 0.9 ms before SYNC0: the error wraps to -0.2 ms.
+        let mut lock = PhaseLock::new(1_000_000, 0, 100_000);
+        let mut shift = None;
+        for k in 0..100u64 {
+            shift = lock.on_exchange(k * 1_000_000 + 100_000);
+        }
+        assert_eq!(lock.stats().window_median_margin_ns, 900_000);
+        assert_eq!(shift, Some(-200_000), "DC back 0.2 ms: SYNC0 later");
     }
 
     #[test]

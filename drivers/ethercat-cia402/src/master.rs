@@ -902,7 +902,7 @@ impl Bus {
             tracing::info!(
                 "EtherCAT DC: SYNC0 moved onto the exchanges: DC system time shifted by {} µs (median margin was {} µs, target {} µs)",
                 shift as f64 / 1000.0,
-                (st.target_margin_ns as i64 + st.last_acquisition_ns) / 1000,
+                st.window_median_margin_ns / 1000,
                 st.target_margin_ns / 1000
             );
         }
