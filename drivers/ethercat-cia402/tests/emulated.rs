@@ -357,8 +357,9 @@ fn a_cycle_below_a_drives_minimum_cycle_time_is_refused_naming_the_axis() {
 /// On the wall clock the drives take their outputs at SYNC0. The pipeline's exchanges
 /// come at a phase of their own and the drives' clocks run 100 ppm fast: the master
 /// moves SYNC0 onto the exchanges and keeps it there, and no SM event is missed but
-/// for an exchange the master itself saw arrive after its SYNC0 (the test thread or
-/// the link thread descheduled for more than the 10 ms margin on a loaded machine).
+/// for an exchange the master itself saw arrive after its SYNC0 or lost (the test
+/// thread or the link thread descheduled for more than the 10 ms margin on a loaded
+/// machine).
 #[test]
 fn a_steady_dc_run_keeps_sync0_after_the_exchange_and_misses_no_sm_event() {
     use std::time::Instant;
@@ -376,7 +377,9 @@ fn a_steady_dc_run_keeps_sync0_after_the_exchange_and_misses_no_sm_event() {
         file.push_str(&p.replace("drive_watchdog_ms = 10", "drive_watchdog_ms = 1000"));
     }
     let file = DriveFile::from_toml_str(&file, "test.drive.toml").expect("drive file");
-    let mut b = backend(&e, file);
+    // An exchange later than 15 ms is lost; one between 10 and 15 ms late is measured
+    // past its SYNC0: every SYNC0 a frame can miss is one or the other.
+    let mut b = backend(&e, file).with_exchange_timeout(Duration::from_millis(15));
     b.on_configure().expect("configure");
     b.read(0).expect("first read");
     b.on_activate().expect("activate");
@@ -388,19 +391,29 @@ fn a_steady_dc_run_keeps_sync0_after_the_exchange_and_misses_no_sm_event() {
         let mut tau = JointVector::zeros();
         tau[0] = 0.2;
         for _ in 0..n {
+            // As the actuator's timer: periods missed while descheduled are skipped,
+            // not replayed in a burst.
             next += period;
+            while next < Instant::now() {
+                next += period;
+            }
             if let Some(w) = next.checked_duration_since(Instant::now()) {
                 std::thread::sleep(w);
             }
             cycle(b, &tau).expect("cycle");
         }
     };
-    // Acquisition in the first window (8 exchanges at 20 ms).
+    // The phase is taken in the first windows (8 exchanges at 20 ms).
     run(&mut b, 30);
     let p0 = b.bus().and_then(|b| b.phase()).expect("DC phase");
-    assert!(p0.acquisitions >= 1, "{p0:?}");
+    // Moved onto the exchanges (an acquisition, or slewed when the pipeline's phase
+    // happened to fall within the lock window).
+    let err0 = p0.window_median_margin_ns as i64 - p0.target_margin_ns as i64;
+    assert!(err0.abs() < 2_500_000, "{p0:?}");
     let before: Vec<_> = (0..2).map(|i| e.drive(i).expect("drive")).collect();
+    let lost0 = b.exchange_stats().lost;
     run(&mut b, 150);
+    let lost = b.exchange_stats().lost - lost0;
     let p = b.bus().and_then(|b| b.phase()).expect("DC phase");
     println!("phase after acquisition {p0:?}\nafter 150 more exchanges {p:?}");
     let late = p.late - p0.late;
@@ -409,8 +422,8 @@ fn a_steady_dc_run_keeps_sync0_after_the_exchange_and_misses_no_sm_event() {
         let d = e.drive(i).expect("drive");
         let missed = u64::from(d.sm_event_missed - d0.sm_event_missed);
         assert!(
-            missed <= late,
-            "drive {i}: {missed} SM events missed, {late} exchanges past their SYNC0"
+            missed <= late + lost,
+            "drive {i}: {missed} SM events missed, {late} exchanges past their SYNC0, {lost} lost"
         );
         assert!(
             d.sync0_latched - d0.sync0_latched >= 145,
@@ -419,14 +432,15 @@ fn a_steady_dc_run_keeps_sync0_after_the_exchange_and_misses_no_sm_event() {
         );
     }
     assert_eq!(p.acquisitions, p0.acquisitions, "no new acquisition: {p:?}");
-    // Kept within 1 ms of the 10 ms target against 100 ppm (2 µs per cycle) of drift:
-    // the median of the last window, and nine in ten margins.
+    // Kept at the 10 ms target against 100 ppm (2 µs per cycle) of drift: the median
+    // of the last window within 1 ms, nine in ten margins within the lock window
+    // (period / 8; the test thread's late wake-ups on a loaded machine spread them).
     assert_eq!(p.target_margin_ns, 10_000_000);
     let err = p.window_median_margin_ns as i64 - p.target_margin_ns as i64;
     assert!(err.abs() < 1_000_000, "{p:?}");
     for q in [0.05, 0.95] {
         let m = p.margin_quantile_ns(q).expect("margins") as i64;
-        assert!((m - 10_000_000).abs() <= 1_000_000, "q {q}: {m} ns, {p:?}");
+        assert!((m - 10_000_000).abs() <= 2_500_000, "q {q}: {m} ns, {p:?}");
     }
     assert!(p.corrections > p0.corrections, "drift followed: {p:?}");
     // The drives' counters read back over SDO agree with the emulator.
