@@ -868,9 +868,10 @@ impl Bus {
     /// which steps its system time; the other clocks follow it through the FRMW of
     /// every exchange (their drift control, ETG.1000.4 9.2). The offset is the one read
     /// at bring-up plus every shift since, so the write does not depend on how long the
-    /// frame takes (an absolute system time written to 0x0910 did: on the loaded host
-    /// the write's own latency, hundreds of µs, went into the phase). Bounded by the
-    /// exchange's deadline; a write that fails is repeated with the next window's.
+    /// frame takes (writing an absolute system time to 0x0910 instead would put the
+    /// write frame's own latency, hundreds of µs on a loaded host, into the phase).
+    /// Bounded by the exchange's deadline; a write that does not come back is taken as
+    /// not applied (the next window measures what did happen and corrects it).
     fn keep_phase(&mut self, dc_ns: u64, deadline: Instant, waker: &Waker) {
         let Some((lock, reference, offset)) = self.phase.as_mut() else {
             return;
@@ -881,8 +882,7 @@ impl Bus {
         };
         let st = lock.stats();
         let reference = *reference;
-        *offset = offset.wrapping_add_signed(shift);
-        let value = *offset;
+        let value = offset.wrapping_add_signed(shift);
         let md = &self.transport.maindevice;
         let guard = self.transport.frame_guard.as_deref();
         let Some(OpGroup::Dc(g)) = &self.group else {
@@ -891,12 +891,17 @@ impl Bus {
         let Ok(sd) = g.subdevice(md, reference) else {
             return;
         };
-        let _ = poll_until(
+        let written = poll_until(
             async move { sd.register_write(0x0920u16, value).await },
             deadline,
             waker,
             guard,
         );
+        if let Some(Ok(_)) = written
+            && let Some((_, _, offset)) = self.phase.as_mut()
+        {
+            *offset = value;
+        }
         if st.acquisitions != acquisitions {
             // Rare (the first window, a restarted pipeline timer): not per cycle.
             tracing::info!(
