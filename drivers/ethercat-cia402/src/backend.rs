@@ -22,7 +22,7 @@ use microrobot_driver::{ActuatorBackend, Fault, JointVector, Measured};
 
 use crate::cia402::{Axis, AxisFault, DriveState, Statusword, Target};
 use crate::drive_file::{DriveFile, Mode};
-use crate::master::{BringUpError, Bus, CycleError, LostCycles, Transport, codes};
+use crate::master::{BringUpError, BringUpOptions, Bus, CycleError, LostCycles, Transport, codes};
 use crate::pdo::Outputs;
 
 /// How long the enable sequence may take before it is a fault.
@@ -73,6 +73,9 @@ pub struct EthercatBackend {
     saturated: bool,
     period: Duration,
     exchange_timeout: Duration,
+    /// With DC: SYNC0 this long after the frame reaches the drives (`None`: the
+    /// master's default).
+    sync0_margin: Option<Duration>,
     /// The last fault was the bus's, not a drive's: a reset brings the bus up again.
     bus_fault: bool,
     stats: ExchangeStats,
@@ -135,6 +138,7 @@ impl EthercatBackend {
             saturated: false,
             period,
             exchange_timeout: period / 2,
+            sync0_margin: None,
             bus_fault: false,
             stats: ExchangeStats::default(),
         })
@@ -143,6 +147,13 @@ impl EthercatBackend {
     /// Bounds each exchange by `timeout` instead of half the cycle.
     pub fn with_exchange_timeout(mut self, timeout: Duration) -> Self {
         self.exchange_timeout = timeout;
+        self
+    }
+
+    /// With distributed clocks, puts SYNC0 `margin` after the frame's arrival at the
+    /// drives instead of the default (the exchange timeout, at most half the cycle).
+    pub fn with_sync0_margin(mut self, margin: Duration) -> Self {
+        self.sync0_margin = Some(margin);
         self
     }
 
@@ -163,7 +174,13 @@ impl EthercatBackend {
 
     fn bring_up(&mut self) -> Result<(), Fault> {
         let up = (self.connect)()
-            .and_then(|t| Bus::bring_up(t, &self.file, self.exchange_timeout))
+            .and_then(|t| {
+                let options = BringUpOptions {
+                    exchange_timeout: self.exchange_timeout,
+                    sync0_margin: self.sync0_margin,
+                };
+                Bus::bring_up_with(t, &self.file, options)
+            })
             .map_err(|e| {
                 let joint = e.axis().and_then(|a| self.joint_of_axis.get(a).copied());
                 fault(joint, e.code(), e.to_string())
@@ -323,6 +340,52 @@ impl EthercatBackend {
     }
 }
 
+/// With DC: the phase of the exchanges against SYNC0 and each drive's SM-event missed
+/// counter and sync error (0x1C32:0B, 0x1C32:20, read over SDO), into the log.
+fn log_sync(bus: &Bus, file: &DriveFile) {
+    let Some(p) = bus.phase() else {
+        return;
+    };
+    tracing::info!(
+        "EtherCAT DC: {} exchanges measured; margin to SYNC0 (target {} µs) last {} µs, {}; {} reached the drives after their SYNC0; {} phase corrections ({} acquisitions), {} µs in all",
+        p.samples,
+        p.target_margin_ns / 1000,
+        p.last_margin_ns / 1000,
+        match (
+            p.margin_quantile_ns(0.01),
+            p.margin_quantile_ns(0.5),
+            p.margin_quantile_ns(0.99),
+        ) {
+            (Some(p1), Some(p50), Some(p99)) => format!(
+                "since the last acquisition {}..{} µs (p1 {} / p50 {} / p99 {} µs, to {} µs)",
+                p.min_margin_ns / 1000,
+                p.max_margin_ns / 1000,
+                p1 / 1000,
+                p50 / 1000,
+                p99 / 1000,
+                p.period_ns / 1000 / crate::dc::MARGIN_BUCKETS as u64
+            ),
+            _ => "no window completed".to_string(),
+        },
+        p.late,
+        p.corrections,
+        p.acquisitions,
+        p.shifted_ns / 1000,
+    );
+    for (i, c) in bus.sync_counters().iter().enumerate() {
+        let joint = file.axes.get(i).map_or("?", |a| a.joint.as_str());
+        match c {
+            Some(c) if c.sm_event_missed > 0 || c.sync_error => tracing::warn!(
+                "axis {i} (joint {joint}): SM-event missed 0x1C32:0B = {}, sync error 0x1C32:20 = {}",
+                c.sm_event_missed,
+                c.sync_error
+            ),
+            Some(_) => {}
+            None => tracing::info!("axis {i} (joint {joint}): 0x1C32:0B/20 not readable"),
+        }
+    }
+}
+
 fn disabled(a: &Axis) -> bool {
     matches!(
         a.state(),
@@ -406,6 +469,9 @@ impl ActuatorBackend for EthercatBackend {
         self.set_targets(Target::Disabled);
         let _ = self.run_until(DISABLE_TIMEOUT, true, |a| a.iter().all(disabled));
         if let Some(mut bus) = self.bus.take() {
+            if !self.bus_fault {
+                log_sync(&bus, &self.file);
+            }
             bus.shut_down();
         }
     }

@@ -9,6 +9,8 @@
 //! - [`scaling`]: per-axis conversions between drive units (encoder counts, per mille of
 //!   rated torque 0x6076) and joint SI units (rad or m, N·m or N), precomputed once.
 //! - [`drive_file`]: the TOML drive file (bus and axes), checked key by key.
+//! - [`dc`]: the SyncManager parameter objects 0x1C32/0x1C33 (sync mode, cycle time)
+//!   and the phase of the exchange against SYNC0.
 //! - [`pdo`]: the process data image (RxPDO 0x1600, TxPDO 0x1A00) and the PRE-OP SDO
 //!   configuration, as data.
 //!
@@ -22,6 +24,7 @@
 
 pub mod backend;
 pub mod cia402;
+pub mod dc;
 pub mod drive_file;
 pub mod master;
 pub mod pdo;

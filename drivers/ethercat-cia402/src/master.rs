@@ -31,6 +31,9 @@ use ethercrab::{
     SubDeviceGroup, SubDeviceState, Timeouts,
 };
 
+use crate::dc::{
+    self, PhaseLock, PhaseStats, SM_INPUT_PARAMETER, SM_OUTPUT_PARAMETER, sub, sync_mode,
+};
 use crate::drive_file::{AxisConfig, DriveFile};
 use crate::pdo::{self, Inputs, Outputs, RX_BYTES, SdoValue, TX_BYTES};
 
@@ -67,6 +70,8 @@ pub mod codes {
     pub const RATED_TORQUE: u32 = 0x00EC_0009;
     /// The bus has another number of SubDevices than the drive file has axes.
     pub const AXIS_COUNT: u32 = 0x00EC_000A;
+    /// A drive cannot run synchronised to DC SYNC0 at the bus cycle (0x1C32:04/05).
+    pub const DC_CONFIG: u32 = 0x00EC_000B;
     /// A SubDevice left OP: the low 16 bits are its AL status code (0x0134,
     /// ETG.1000.6 table 11).
     pub const LEFT_OP: u32 = 0x00ED_0000;
@@ -152,6 +157,40 @@ pub enum BringUpError {
         /// ethercrab's error (an SDO abort carries its code).
         source: Error,
     },
+    /// A drive with distributed clocks that offers no DC SYNC0 sync mode (0x1C32:04).
+    #[error(
+        "axis {axis} (joint {joint}, bus position {axis}, vendor {vendor:#010x} product {product:#010x}): the drive offers no DC SYNC0 synchronisation (0x1C32:04 sync modes supported = {supported:#06x})"
+    )]
+    DcUnsupported {
+        /// Axis index (= bus position).
+        axis: usize,
+        /// Its joint.
+        joint: String,
+        /// Vendor id.
+        vendor: u32,
+        /// Product code.
+        product: u32,
+        /// 0x1C32:04 as read.
+        supported: u16,
+    },
+    /// The bus cycle is shorter than a drive's minimum cycle time (0x1C32:05).
+    #[error(
+        "axis {axis} (joint {joint}, bus position {axis}, vendor {vendor:#010x} product {product:#010x}): bus.cycle_us {cycle_us} µs is below the drive's minimum cycle time 0x1C32:05 = {min_ns} ns"
+    )]
+    CycleTooShort {
+        /// Axis index (= bus position).
+        axis: usize,
+        /// Its joint.
+        joint: String,
+        /// Vendor id.
+        vendor: u32,
+        /// Product code.
+        product: u32,
+        /// The bus cycle (µs).
+        cycle_us: u32,
+        /// 0x1C32:05 as read (ns).
+        min_ns: u32,
+    },
     /// The process image of an axis is not the mapped one.
     #[error(
         "axis {axis} (joint {joint}): process image is {inputs} input and {outputs} output bytes, the mapping gives {TX_BYTES} and {RX_BYTES}"
@@ -196,6 +235,8 @@ impl BringUpError {
             | BringUpError::RatedTorque { axis, .. }
             | BringUpError::Configure { axis, .. }
             | BringUpError::Image { axis, .. }
+            | BringUpError::DcUnsupported { axis, .. }
+            | BringUpError::CycleTooShort { axis, .. }
             | BringUpError::Watchdog { axis, .. } => Some(*axis),
             _ => None,
         }
@@ -207,6 +248,9 @@ impl BringUpError {
             BringUpError::WrongIdentity { .. } => codes::WRONG_IDENTITY,
             BringUpError::RatedTorque { .. } => codes::RATED_TORQUE,
             BringUpError::AxisCount { .. } => codes::AXIS_COUNT,
+            BringUpError::DcUnsupported { .. } | BringUpError::CycleTooShort { .. } => {
+                codes::DC_CONFIG
+            }
             _ => codes::BRING_UP,
         }
     }
@@ -438,6 +482,8 @@ enum OpGroup {
 struct Response {
     wkc: u16,
     not_op: Option<usize>,
+    /// DC system time of the reference clock as the frame passed it.
+    dc_ns: Option<u64>,
 }
 
 fn summarize<E>(r: &ethercrab::subdevice_group::TxRxResponse<MAX_SUBDEVICES, E>) -> Response {
@@ -447,6 +493,7 @@ fn summarize<E>(r: &ethercrab::subdevice_group::TxRxResponse<MAX_SUBDEVICES, E>)
             .subdevice_states
             .iter()
             .position(|s| *s != SubDeviceState::Op),
+        dc_ns: None,
     }
 }
 
@@ -459,6 +506,31 @@ pub struct Bus {
     exchange_timeout: Duration,
     waker: Option<(ThreadId, Waker)>,
     dc: bool,
+    /// With DC: the phase of the exchange against SYNC0, the bus position of the
+    /// reference clock (the first SubDevice with DC, as ethercrab picks it)
+    /// and the system time offset (0x0920) last written to it.
+    phase: Option<(PhaseLock, usize, u64)>,
+}
+
+/// Options of [`Bus::bring_up_with`].
+#[derive(Debug, Clone, Copy)]
+pub struct BringUpOptions {
+    /// Bounds each cyclic exchange; shorter than the cycle.
+    pub exchange_timeout: Duration,
+    /// With DC: how long after the frame reaches the drives their SYNC0 should come
+    /// (the outputs' margin), see [`PhaseLock`]. `None`: the exchange timeout, at most
+    /// half the cycle, so that an exchange back in time also reached the drives before
+    /// SYNC0.
+    pub sync0_margin: Option<Duration>,
+}
+
+/// 0x1C32:0B and 0x1C32:20 of one drive, read back over SDO.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SyncCounters {
+    /// SM-event missed counter.
+    pub sm_event_missed: u16,
+    /// Sync error.
+    pub sync_error: bool,
 }
 
 fn configure_err(
@@ -487,9 +559,34 @@ impl Bus {
         file: &DriveFile,
         exchange_timeout: Duration,
     ) -> Result<Bus, BringUpError> {
+        Bus::bring_up_with(
+            transport,
+            file,
+            BringUpOptions {
+                exchange_timeout,
+                sync0_margin: None,
+            },
+        )
+    }
+
+    /// [`Bus::bring_up`] with all its options.
+    pub fn bring_up_with(
+        transport: Transport,
+        file: &DriveFile,
+        options: BringUpOptions,
+    ) -> Result<Bus, BringUpError> {
+        let exchange_timeout = options.exchange_timeout;
         let period = Duration::from_micros(u64::from(file.bus.cycle_us));
+        let period_ns = period.as_nanos() as u64;
+        let margin_ns = options
+            .sync0_margin
+            .unwrap_or(exchange_timeout.min(period / 2))
+            .as_nanos()
+            .min(u128::from(period_ns)) as u64;
+        let mut phase = PhaseLock::new(period_ns, 0, margin_ns);
+        let mut dc_reference = None;
         let md = &transport.maindevice;
-        let (group, dc) = async_io::block_on(async {
+        let (group, reference_offset) = async_io::block_on(async {
             let mut group: Group<PreOp> = md
                 .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercrab::std::ethercat_now)
                 .await
@@ -571,7 +668,9 @@ impl Bus {
                         "ESC 0x0420".into(),
                     ))?;
                 if sd.dc_support().any() {
+                    configure_sync_parameters(&sd, i, cfg, period_ns).await?;
                     sd.set_dc_sync(DcSync::Sync0);
+                    dc_reference.get_or_insert(i);
                     any_dc = true;
                 }
             }
@@ -587,19 +686,37 @@ impl Bus {
                         DcConfiguration {
                             start_delay: Duration::from_millis(100),
                             sync0_period: period,
-                            sync0_shift: period / 2,
+                            // Only enters ethercrab's `next_cycle_wait`, which the
+                            // driver does not use: the exchange is the pipeline's, and
+                            // the SYNC0 grid is moved onto it (`PhaseLock`).
+                            sync0_shift: Duration::ZERO,
                         },
                     )
                     .await
                     .map_err(state("distributed clocks"))?;
+                // The first SYNC0 (system time, as ethercrab rounded it), read back from
+                // the reference clock: bring-up ends once SYNC0 runs, so the drives
+                // take outputs from the first cycle of the pipeline on.
+                let sync0_start = match dc_reference {
+                    Some(r) => group
+                        .subdevice(md, r)
+                        .map_err(state("distributed clocks"))?
+                        .register_read::<u64>(0x0990u16)
+                        .await
+                        .map_err(state("distributed clocks"))?,
+                    None => 0,
+                };
                 let group = group.into_safe_op(md).await.map_err(state("SAFE-OP"))?;
                 let group = group.request_into_op(md).await.map_err(state("OP"))?;
                 // With SYNC0 running, the SubDevices reach OP only while process data
-                // flows: cycle until they are all there.
+                // flows: cycle until they are all there and SYNC0 has run two cycles.
                 let start = Instant::now();
                 loop {
                     let r = group.tx_rx_dc(md).await.map_err(state("OP"))?;
-                    if r.all_op() {
+                    phase.on_exchange(r.extra.dc_system_time);
+                    let sync0_runs =
+                        r.extra.dc_system_time >= sync0_start.saturating_add(2 * period_ns);
+                    if r.all_op() && sync0_runs {
                         break;
                     }
                     if start.elapsed() > timeouts().state_transition {
@@ -610,11 +727,22 @@ impl Bus {
                     }
                     async_io::Timer::after(period).await;
                 }
-                Ok((OpGroup::Dc(group), true))
+                // The reference clock's system time offset, which the phase is kept
+                // with (`Bus::keep_phase`).
+                let offset = match dc_reference {
+                    Some(r) => group
+                        .subdevice(md, r)
+                        .map_err(state("distributed clocks"))?
+                        .register_read::<u64>(0x0920u16)
+                        .await
+                        .map_err(state("distributed clocks"))?,
+                    None => 0,
+                };
+                Ok((OpGroup::Dc(group), Some(offset)))
             } else {
                 let group = group.into_safe_op(md).await.map_err(state("SAFE-OP"))?;
                 let group = group.into_op(md).await.map_err(state("OP"))?;
-                Ok((OpGroup::Free(group), false))
+                Ok((OpGroup::Free(group), None))
             }
         })?;
         let mut images = Vec::with_capacity(file.axes.len());
@@ -634,6 +762,20 @@ impl Bus {
             }
             images.push((inputs, outputs));
         }
+        let dc = reference_offset.is_some();
+        let phase = match (reference_offset, dc_reference) {
+            (Some(offset), Some(r)) => {
+                let st = phase.stats();
+                tracing::info!(
+                    "EtherCAT DC: SYNC0 every {} µs, sync mode DC SYNC0 (0x1C32:01 = 2) on every DC drive, reference clock at bus position {r}; SYNC0 is to fall {} µs after the frame reaches the drives and is moved onto the pipeline's exchanges in their first ~100 ms (the bring-up's own exchanges had a margin of {} µs)",
+                    period_ns / 1000,
+                    st.target_margin_ns / 1000,
+                    st.last_margin_ns / 1000,
+                );
+                Some((PhaseLock::new(period_ns, 0, margin_ns), r, offset))
+            }
+            _ => None,
+        };
         Ok(Bus {
             axes: file.axes.len(),
             expected_wkc: pdo::expected_working_counter(images),
@@ -642,6 +784,7 @@ impl Bus {
             exchange_timeout,
             waker: None,
             dc,
+            phase,
         })
     }
 
@@ -684,8 +827,12 @@ impl Bus {
             Some(OpGroup::Free(g)) => {
                 poll_until(g.tx_rx(md), deadline, &waker, guard).map(|r| r.map(|r| summarize(&r)))
             }
-            Some(OpGroup::Dc(g)) => poll_until(g.tx_rx_dc(md), deadline, &waker, guard)
-                .map(|r| r.map(|r| summarize(&r))),
+            Some(OpGroup::Dc(g)) => poll_until(g.tx_rx_dc(md), deadline, &waker, guard).map(|r| {
+                r.map(|r| Response {
+                    dc_ns: Some(r.extra.dc_system_time),
+                    ..summarize(&r)
+                })
+            }),
             None => return Err(CycleError::Bus),
         };
         let resp = match resp {
@@ -693,6 +840,9 @@ impl Bus {
             Some(Err(_)) => return Err(CycleError::Bus),
             Some(Ok(r)) => r,
         };
+        if let Some(dc_ns) = resp.dc_ns {
+            self.keep_phase(dc_ns, deadline, &waker);
+        }
         if let Some(position) = resp.not_op {
             // The cycle fails anyway: the AL status code that says why is worth waiting
             // a little longer than an exchange for (on a loaded host a read bounded by
@@ -710,6 +860,99 @@ impl Bus {
             });
         }
         Ok(())
+    }
+
+    /// Measures the exchange whose frame passed the reference clock at `dc_ns` and, once
+    /// per window, moves the SYNC0 grid onto the exchanges ([`PhaseLock`]): the shift is
+    /// added to the reference clock's system time offset (FPWR 0x0920, ETG.1000.4 9.1),
+    /// which steps its system time; the other clocks follow it through the FRMW of
+    /// every exchange (their drift control, ETG.1000.4 9.2). The offset is the one read
+    /// at bring-up plus every shift since, so the write does not depend on how long the
+    /// frame takes (writing an absolute system time to 0x0910 instead would put the
+    /// write frame's own latency, hundreds of µs on a loaded host, into the phase).
+    /// Bounded by the exchange's deadline; a write that does not come back is taken as
+    /// not applied (the next window measures what did happen and corrects it).
+    fn keep_phase(&mut self, dc_ns: u64, deadline: Instant, waker: &Waker) {
+        let Some((lock, reference, offset)) = self.phase.as_mut() else {
+            return;
+        };
+        let acquisitions = lock.stats().acquisitions;
+        let Some(shift) = lock.on_exchange(dc_ns) else {
+            return;
+        };
+        let st = lock.stats();
+        let reference = *reference;
+        let value = offset.wrapping_add_signed(shift);
+        let md = &self.transport.maindevice;
+        let guard = self.transport.frame_guard.as_deref();
+        let Some(OpGroup::Dc(g)) = &self.group else {
+            return;
+        };
+        let Ok(sd) = g.subdevice(md, reference) else {
+            return;
+        };
+        let written = poll_until(
+            async move { sd.register_write(0x0920u16, value).await },
+            deadline,
+            waker,
+            guard,
+        );
+        if let Some(Ok(_)) = written
+            && let Some((_, _, offset)) = self.phase.as_mut()
+        {
+            *offset = value;
+        }
+        if st.acquisitions != acquisitions {
+            // Rare (the first window, a restarted pipeline timer): not per cycle.
+            tracing::info!(
+                "EtherCAT DC: SYNC0 moved onto the exchanges: DC system time shifted by {} µs (median margin was {} µs, target {} µs)",
+                shift as f64 / 1000.0,
+                st.window_median_margin_ns / 1000,
+                st.target_margin_ns / 1000
+            );
+        }
+    }
+
+    /// With DC: the phase of the exchanges against SYNC0 so far.
+    pub fn phase(&self) -> Option<PhaseStats> {
+        self.phase.as_ref().map(|(l, _, _)| l.stats())
+    }
+
+    /// With DC: 0x1C32:0B (SM-event missed) and 0x1C32:20 (sync error) of every axis,
+    /// read over SDO (not cyclic: at shut-down or after a fault); `None` for an axis
+    /// whose read failed (or a drive without them) and for every axis after it.
+    pub fn sync_counters(&self) -> Vec<Option<SyncCounters>> {
+        let md = &self.transport.maindevice;
+        let Some(OpGroup::Dc(g)) = &self.group else {
+            return Vec::new();
+        };
+        // A drive that does not answer ends the reads: the bus is likely gone, and each
+        // read would wait out ethercrab's mailbox timeout.
+        let mut answering = true;
+        (0..self.axes)
+            .map(|i| {
+                if !answering {
+                    return None;
+                }
+                let sd = g.subdevice(md, i).ok()?;
+                let c = async_io::block_on(async {
+                    let missed = sd
+                        .sdo_read::<u16>(SM_OUTPUT_PARAMETER, sub::SM_EVENT_MISSED)
+                        .await
+                        .ok()?;
+                    let error = sd
+                        .sdo_read::<u8>(SM_OUTPUT_PARAMETER, sub::SYNC_ERROR)
+                        .await
+                        .ok()?;
+                    Some(SyncCounters {
+                        sm_event_missed: missed,
+                        sync_error: error != 0,
+                    })
+                });
+                answering = c.is_some();
+                c
+            })
+            .collect()
     }
 
     fn al_status_code(&self, position: usize, deadline: Instant, waker: &Waker) -> u16 {
@@ -781,6 +1024,87 @@ impl Bus {
             }
         });
     }
+}
+
+/// PRE-OP, axis `i` with distributed clocks: reads 0x1C32:04 (sync modes supported)
+/// and 0x1C32:05 (minimum cycle time), refuses a drive without DC SYNC0 or a bus cycle
+/// below its minimum, then writes sync mode DC SYNC0 and the cycle time into 0x1C32
+/// and 0x1C33 (ETG.1020 / ETG.6010). A drive without 0x1C32 is left as it is (SYNC0
+/// still configured, as for drives whose sync mode follows the ESC's DC activation).
+/// 0x1C33 writes a drive refuses are ignored: many derive 0x1C33:01 from 0x1C32:01.
+async fn configure_sync_parameters<S: std::ops::Deref<Target = ethercrab::SubDevice>>(
+    sd: &ethercrab::SubDeviceRef<'_, S>,
+    axis: usize,
+    cfg: &AxisConfig,
+    period_ns: u64,
+) -> Result<(), BringUpError> {
+    use ethercrab::error::{CoeAbortCode, MailboxError};
+    let object = |s: u8| format!("{SM_OUTPUT_PARAMETER:#06x}:{s:02x}");
+    let supported = match sd
+        .sdo_read::<u16>(SM_OUTPUT_PARAMETER, sub::SYNC_MODES_SUPPORTED)
+        .await
+    {
+        Ok(v) => v,
+        Err(Error::Mailbox(MailboxError::Aborted {
+            code: CoeAbortCode::NotFound | CoeAbortCode::SubIndexNotFound,
+            ..
+        })) => return Ok(()),
+        Err(source) => {
+            return Err(configure_err(axis, cfg, "sync modes supported", object(4))(
+                source,
+            ));
+        }
+    };
+    if !dc::sync_mode_supported(supported, sync_mode::DC_SYNC0) {
+        return Err(BringUpError::DcUnsupported {
+            axis,
+            joint: cfg.joint.clone(),
+            vendor: cfg.vendor_id,
+            product: cfg.product_code,
+            supported,
+        });
+    }
+    let min_ns = sd
+        .sdo_read::<u32>(SM_OUTPUT_PARAMETER, sub::MIN_CYCLE_TIME)
+        .await
+        .map_err(configure_err(axis, cfg, "minimum cycle time", object(5)))?;
+    if period_ns < u64::from(min_ns) {
+        return Err(BringUpError::CycleTooShort {
+            axis,
+            joint: cfg.joint.clone(),
+            vendor: cfg.vendor_id,
+            product: cfg.product_code,
+            cycle_us: (period_ns / 1000) as u32,
+            min_ns,
+        });
+    }
+    let cycle_ns = u32::try_from(period_ns).unwrap_or(u32::MAX);
+    sd.sdo_write(SM_OUTPUT_PARAMETER, sub::SYNC_MODE, sync_mode::DC_SYNC0)
+        .await
+        .map_err(configure_err(axis, cfg, "sync mode DC SYNC0", object(1)))?;
+    sd.sdo_write(SM_OUTPUT_PARAMETER, sub::CYCLE_TIME, cycle_ns)
+        .await
+        .map_err(configure_err(axis, cfg, "cycle time", object(2)))?;
+    for (s, r) in [
+        (
+            sub::SYNC_MODE,
+            sd.sdo_write(SM_INPUT_PARAMETER, sub::SYNC_MODE, sync_mode::DC_SYNC0)
+                .await,
+        ),
+        (
+            sub::CYCLE_TIME,
+            sd.sdo_write(SM_INPUT_PARAMETER, sub::CYCLE_TIME, cycle_ns)
+                .await,
+        ),
+    ] {
+        if let Err(e) = r {
+            tracing::warn!(
+                "axis {axis} (joint {}): {SM_INPUT_PARAMETER:#06x}:{s:02x} not written ({e}); the drive keeps its own",
+                cfg.joint
+            );
+        }
+    }
+    Ok(())
 }
 
 fn image_sizes(
@@ -899,6 +1223,7 @@ mod tests {
             codes::WRONG_IDENTITY,
             codes::RATED_TORQUE,
             codes::AXIS_COUNT,
+            codes::DC_CONFIG,
         ] {
             assert!(c > 0xFFFF);
         }

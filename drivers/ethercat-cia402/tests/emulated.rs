@@ -316,3 +316,141 @@ fn a_wrong_count_or_rated_torque_is_refused_naming_it() {
         "{f}"
     );
 }
+
+#[test]
+fn bring_up_sets_dc_sync0_mode_and_the_cycle_time_in_pre_op() {
+    let e = Emulator::new(&ChainConfig::inertia_chain(3)).expect("chain");
+    let mut b = active(&e, 3);
+    assert!(b.bus().expect("bus").distributed_clocks());
+    for i in 0..3 {
+        let d = e.drive(i).expect("drive");
+        assert_eq!((d.sync_mode, d.cycle_time_ns), (2, 1_000_000), "drive {i}");
+        assert_eq!(d.al_state, 8);
+    }
+    b.on_shutdown();
+}
+
+#[test]
+fn a_cycle_below_a_drives_minimum_cycle_time_is_refused_naming_the_axis() {
+    let mut chain = ChainConfig::inertia_chain(3);
+    chain.drives[1].min_cycle_time_ns = 2_000_000;
+    let e = Emulator::new(&chain).expect("chain");
+    let f = backend(&e, drive_file(3, 1.27))
+        .on_configure()
+        .expect_err("1 ms is below 2 ms");
+    assert_eq!((f.joint, f.code), (Some(1), codes::DC_CONFIG), "{f}");
+    for part in [
+        "axis 1",
+        "joint j2",
+        "bus position 1",
+        "0x1C32:05 = 2000000 ns",
+        "1000 µs",
+    ] {
+        assert!(f.text.contains(part), "{part}: {f}");
+    }
+    // Refused before the sync mode was written, and nothing reached OP.
+    let d = e.drive(1).expect("drive");
+    assert_eq!(d.sync_mode, 0);
+    assert!((0..3).all(|i| e.drive(i).expect("drive").al_state != 8));
+}
+
+/// On the wall clock the drives take their outputs at SYNC0. The pipeline's exchanges
+/// come at a phase of their own and the drives' clocks run 100 ppm fast: the master
+/// moves SYNC0 onto the exchanges and keeps it there, and no SM event is missed but
+/// for an exchange the master itself saw arrive after its SYNC0 or lost (the test
+/// thread or the link thread descheduled for more than the 10 ms margin on a loaded
+/// machine).
+#[test]
+fn a_steady_dc_run_keeps_sync0_after_the_exchange_and_misses_no_sm_event() {
+    use std::time::Instant;
+    let mut chain = ChainConfig::inertia_chain(2);
+    chain.time = microrobot_ethercat_emulator::TimeMode::WallClock { max_step_s: 0.05 };
+    chain.dc_drift_ppm = 100.0;
+    let e = Emulator::new(&chain).expect("chain");
+    // A 20 ms cycle: SYNC0 10 ms after the exchange, so that a loaded test machine's
+    // late wake-ups (the other tests run beside this one) stay inside the margin.
+    let text = include_str!("../example.drive.toml").replace("cycle_us = 1000", "cycle_us = 20000");
+    let mut parts = text.split("\n[[axis]]\n");
+    let mut file = parts.next().expect("bus").to_string();
+    for p in parts.take(2) {
+        file.push_str("\n[[axis]]\n");
+        file.push_str(&p.replace("drive_watchdog_ms = 10", "drive_watchdog_ms = 1000"));
+    }
+    let file = DriveFile::from_toml_str(&file, "test.drive.toml").expect("drive file");
+    // An exchange later than 15 ms is lost; one between 10 and 15 ms late is measured
+    // past its SYNC0: every SYNC0 a frame can miss is one or the other.
+    let mut b = backend(&e, file).with_exchange_timeout(Duration::from_millis(15));
+    b.on_configure().expect("configure");
+    b.read(0).expect("first read");
+    b.on_activate().expect("activate");
+    let period = Duration::from_millis(20);
+    // The pipeline's phase: 3.7 ms off whatever the bring-up had.
+    std::thread::sleep(Duration::from_micros(3700));
+    let mut next = Instant::now();
+    let mut run = |b: &mut EthercatBackend, n: usize| {
+        let mut tau = JointVector::zeros();
+        tau[0] = 0.2;
+        for _ in 0..n {
+            // As the actuator's timer: periods missed while descheduled are skipped,
+            // not replayed in a burst.
+            next += period;
+            while next < Instant::now() {
+                next += period;
+            }
+            if let Some(w) = next.checked_duration_since(Instant::now()) {
+                std::thread::sleep(w);
+            }
+            cycle(b, &tau).expect("cycle");
+        }
+    };
+    // The phase is taken in the first windows (8 exchanges at 20 ms).
+    run(&mut b, 30);
+    let p0 = b.bus().and_then(|b| b.phase()).expect("DC phase");
+    // Moved onto the exchanges (an acquisition, or slewed when the pipeline's phase
+    // happened to fall within the lock window).
+    let err0 = p0.window_median_margin_ns as i64 - p0.target_margin_ns as i64;
+    assert!(err0.abs() < 2_500_000, "{p0:?}");
+    let before: Vec<_> = (0..2).map(|i| e.drive(i).expect("drive")).collect();
+    let lost0 = b.exchange_stats().lost;
+    run(&mut b, 150);
+    let lost = b.exchange_stats().lost - lost0;
+    let p = b.bus().and_then(|b| b.phase()).expect("DC phase");
+    println!("phase after acquisition {p0:?}\nafter 150 more exchanges {p:?}");
+    let late = p.late - p0.late;
+    assert!(late <= 3, "{late} of 150 exchanges past their SYNC0: {p:?}");
+    for (i, d0) in before.iter().enumerate() {
+        let d = e.drive(i).expect("drive");
+        let missed = u64::from(d.sm_event_missed - d0.sm_event_missed);
+        assert!(
+            missed <= late + lost,
+            "drive {i}: {missed} SM events missed, {late} exchanges past their SYNC0, {lost} lost"
+        );
+        assert!(
+            d.sync0_latched - d0.sync0_latched >= 145,
+            "drive {i}: outputs taken at {} SYNC0 events",
+            d.sync0_latched - d0.sync0_latched
+        );
+    }
+    assert_eq!(p.acquisitions, p0.acquisitions, "no new acquisition: {p:?}");
+    // Kept at the 10 ms target against 100 ppm (2 µs per cycle) of drift: the median
+    // of the last window within 1 ms, nine in ten margins within the lock window
+    // (period / 8; the test thread's late wake-ups on a loaded machine spread them).
+    assert_eq!(p.target_margin_ns, 10_000_000);
+    let err = p.window_median_margin_ns as i64 - p.target_margin_ns as i64;
+    assert!(err.abs() < 1_000_000, "{p:?}");
+    for q in [0.05, 0.95] {
+        let m = p.margin_quantile_ns(q).expect("margins") as i64;
+        assert!((m - 10_000_000).abs() <= 2_500_000, "q {q}: {m} ns, {p:?}");
+    }
+    assert!(p.corrections > p0.corrections, "drift followed: {p:?}");
+    // The drives' counters read back over SDO agree with the emulator.
+    let counters = b.bus().expect("bus").sync_counters();
+    for (i, c) in counters.iter().enumerate() {
+        let c = c.expect("0x1C32:0B readable");
+        assert_eq!(
+            c.sm_event_missed,
+            e.drive(i).expect("drive").sm_event_missed
+        );
+    }
+    b.on_shutdown();
+}

@@ -9,6 +9,10 @@ use std::path::Path;
 pub const SEED_VENDOR_ID: u32 = 0x0000_009A;
 /// Product code of the seed arm's drives (the same as in the driver's example drive file).
 pub const SEED_PRODUCT_CODE: u32 = 0x0003_0924;
+/// Default minimum cycle time of a drive (ns), 0x1C32:05: 125 µs (8 kHz).
+pub const DEFAULT_MIN_CYCLE_TIME_NS: u32 = 125_000;
+/// Default calc-and-copy time of a drive (ns), 0x1C32:06.
+pub const DEFAULT_CALC_COPY_TIME_NS: u32 = 20_000;
 
 /// A configuration value out of range or a file that cannot be read; `key` names the
 /// value as in the TOML file (`drive[2].gear_ratio`).
@@ -57,6 +61,11 @@ pub struct DriveConfig {
     pub csp_kp_nm_per_rad: f64,
     /// Velocity damping of the drive in CSP mode (joint N·m per rad/s).
     pub csp_kd_nm_s_per_rad: f64,
+    /// Shortest cycle the drive runs synchronised (ns), 0x1C32:05 / 0x1C33:05.
+    pub min_cycle_time_ns: u32,
+    /// Time the drive needs from the SYNC0 event to its outputs applied (ns),
+    /// 0x1C32:06 / 0x1C33:06.
+    pub calc_copy_time_ns: u32,
 }
 
 /// Which plant the chain's motors drive.
@@ -98,6 +107,10 @@ pub struct ChainConfig {
     pub plant: PlantKind,
     /// How simulated time advances.
     pub time: TimeMode,
+    /// Rate error of the drives' clocks (DC, watchdog) against the host's monotonic
+    /// clock (ppm; positive: the drives' clocks run fast). On hardware the DC reference
+    /// clock's crystal drifts this way; 0 by default.
+    pub dc_drift_ppm: f64,
 }
 
 impl DriveConfig {
@@ -124,6 +137,8 @@ impl DriveConfig {
             max_torque_per_mille: 3000,
             csp_kp_nm_per_rad: 2000.0,
             csp_kd_nm_s_per_rad: 60.0,
+            min_cycle_time_ns: DEFAULT_MIN_CYCLE_TIME_NS,
+            calc_copy_time_ns: DEFAULT_CALC_COPY_TIME_NS,
         }
     }
 }
@@ -136,6 +151,7 @@ impl ChainConfig {
             drives: (0..6).map(DriveConfig::seed_axis).collect(),
             plant: PlantKind::SeedArm,
             time: TimeMode::PerExchange { cycle_s: 0.001 },
+            dc_drift_ppm: 0.0,
         }
     }
 
@@ -147,6 +163,7 @@ impl ChainConfig {
                 inertia_kg_m2: 0.05,
             },
             time: TimeMode::PerExchange { cycle_s: 0.001 },
+            dc_drift_ppm: 0.0,
         }
     }
 
@@ -194,6 +211,15 @@ impl ChainConfig {
                     return Err(err(k(key), format!("must be zero or positive, got {v}")));
                 }
             }
+            if d.min_cycle_time_ns == 0 {
+                return Err(err(k("min_cycle_time_ns"), "must be positive".into()));
+            }
+        }
+        if !(self.dc_drift_ppm.is_finite() && self.dc_drift_ppm.abs() <= 1000.0) {
+            return Err(err(
+                "dc_drift_ppm".into(),
+                format!("must be within ±1000 ppm, got {}", self.dc_drift_ppm),
+            ));
         }
         match self.plant {
             PlantKind::SeedArm if self.drives.len() != 6 => {
@@ -269,6 +295,8 @@ struct ChainFile {
     /// A chain of `drives` seed-kind drives, when no `[[drive]]` is given.
     drives: Option<usize>,
     #[serde(default)]
+    dc_drift_ppm: f64,
+    #[serde(default)]
     drive: Vec<DriveFile>,
 }
 
@@ -290,6 +318,8 @@ struct DriveFile {
     max_torque_per_mille: Option<u16>,
     csp_kp_nm_per_rad: Option<f64>,
     csp_kd_nm_s_per_rad: Option<f64>,
+    min_cycle_time_ns: Option<u32>,
+    calc_copy_time_ns: Option<u32>,
 }
 
 impl ChainFile {
@@ -331,6 +361,8 @@ impl ChainFile {
                             .unwrap_or(s.max_torque_per_mille),
                         csp_kp_nm_per_rad: d.csp_kp_nm_per_rad.unwrap_or(s.csp_kp_nm_per_rad),
                         csp_kd_nm_s_per_rad: d.csp_kd_nm_s_per_rad.unwrap_or(s.csp_kd_nm_s_per_rad),
+                        min_cycle_time_ns: d.min_cycle_time_ns.unwrap_or(s.min_cycle_time_ns),
+                        calc_copy_time_ns: d.calc_copy_time_ns.unwrap_or(s.calc_copy_time_ns),
                     }
                 })
                 .collect(),
@@ -368,6 +400,7 @@ impl ChainFile {
             drives,
             plant,
             time,
+            dc_drift_ppm: self.dc_drift_ppm,
         })
     }
 }
@@ -387,6 +420,18 @@ mod tests {
         assert_eq!(c.drives[0].identity.vendor_id, 0x42);
         assert_eq!(c.drives[1].gear_ratio, 10.0);
         assert_eq!(c.time, TimeMode::PerExchange { cycle_s: 0.002 });
+        assert_eq!(c.dc_drift_ppm, 0.0);
+        assert_eq!(c.drives[0].min_cycle_time_ns, DEFAULT_MIN_CYCLE_TIME_NS);
+        let c = ChainConfig::from_toml_str(
+            "dc_drift_ppm = -40.0\n[[drive]]\nmin_cycle_time_ns = 250000\ncalc_copy_time_ns = 5000\n",
+            "t.toml",
+        )
+        .expect("valid");
+        assert_eq!(c.dc_drift_ppm, -40.0);
+        assert_eq!(
+            (c.drives[0].min_cycle_time_ns, c.drives[0].calc_copy_time_ns),
+            (250_000, 5_000)
+        );
     }
 
     #[test]
@@ -411,5 +456,11 @@ mod tests {
         assert!(e.message.contains("drivez"), "{e}");
         let e = ChainConfig::from_toml_str("drives = 0\n", "t.toml").expect_err("empty");
         assert_eq!(e.key, "drive");
+        let e = ChainConfig::from_toml_str("drives = 1\ndc_drift_ppm = 5000.0\n", "t.toml")
+            .expect_err("drift");
+        assert_eq!(e.key, "dc_drift_ppm");
+        let e = ChainConfig::from_toml_str("[[drive]]\nmin_cycle_time_ns = 0\n", "t.toml")
+            .expect_err("zero minimum cycle");
+        assert_eq!(e.key, "drive[0].min_cycle_time_ns");
     }
 }

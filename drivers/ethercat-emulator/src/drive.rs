@@ -7,6 +7,8 @@ use std::f64::consts::TAU;
 
 use microrobot_ethercat_cia402::cia402::{Command, Controlword, DriveState, Statusword};
 
+use microrobot_ethercat_cia402::dc::{SM_INPUT_PARAMETER, SM_OUTPUT_PARAMETER, sub, sync_mode};
+
 use crate::config::DriveConfig;
 use crate::od::{
     Access, Mappable, ObjectDictionary, RXPDO_MAP, SM2_ASSIGN, SM3_ASSIGN, TXPDO_MAP, mapping,
@@ -19,6 +21,9 @@ pub const MODE_CST: i8 = 10;
 /// Error code (0x603F) the drive latches when process data stop while it is enabled
 /// (CiA 402 0x6007 abort connection reaction; 0x8130: heartbeat/life guard error).
 pub const ERROR_COMMUNICATION: u16 = 0x8130;
+/// 0x1C32:04 / 0x1C33:04 of every emulated drive: free run (bit 0), synchronous with
+/// the SM event (bit 1), DC SYNC0 (bits 2-3 = 01).
+pub const SYNC_MODES_SUPPORTED: u16 = 0x0007;
 /// Speed (rad/s, joint side) under which a quick stop counts as done.
 const QUICK_STOP_DONE_RAD_S: f64 = 1e-3;
 
@@ -73,6 +78,51 @@ impl Drive {
         for (index, pdo) in [(SM2_ASSIGN, RXPDO_MAP), (SM3_ASSIGN, TXPDO_MAP)] {
             od.insert(index, 0, &[1], RwPreOp, M::No);
             od.insert(index, 1, &pdo.to_le_bytes(), RwPreOp, M::No);
+        }
+        // SyncManager parameters (ETG.1020 / ETG.6010): SM2 outputs, SM3 inputs. Free
+        // run until the master asks for more; free run, SM-synchronous and DC SYNC0
+        // supported.
+        for index in [SM_OUTPUT_PARAMETER, SM_INPUT_PARAMETER] {
+            od.insert(index, 0, &[sub::SYNC_ERROR], Ro, M::No);
+            od.insert(
+                index,
+                sub::SYNC_MODE,
+                &sync_mode::FREE_RUN.to_le_bytes(),
+                RwPreOp,
+                M::No,
+            );
+            od.insert(index, sub::CYCLE_TIME, &0u32.to_le_bytes(), Rw, M::No);
+            od.insert(index, sub::SHIFT_TIME, &0u32.to_le_bytes(), Ro, M::No);
+            od.insert(
+                index,
+                sub::SYNC_MODES_SUPPORTED,
+                &SYNC_MODES_SUPPORTED.to_le_bytes(),
+                Ro,
+                M::No,
+            );
+            od.insert(
+                index,
+                sub::MIN_CYCLE_TIME,
+                &cfg.min_cycle_time_ns.to_le_bytes(),
+                Ro,
+                M::No,
+            );
+            od.insert(
+                index,
+                sub::CALC_AND_COPY_TIME,
+                &cfg.calc_copy_time_ns.to_le_bytes(),
+                Ro,
+                M::No,
+            );
+            od.insert(index, sub::SM_EVENT_MISSED, &0u16.to_le_bytes(), Ro, M::No);
+            od.insert(
+                index,
+                sub::CYCLE_TIME_TOO_SMALL,
+                &0u16.to_le_bytes(),
+                Ro,
+                M::No,
+            );
+            od.insert(index, sub::SYNC_ERROR, &[0], Ro, M::No);
         }
         // CiA 402 device profile area.
         od.insert(0x603F, 0, &0u16.to_le_bytes(), Ro, M::Tx);

@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use microrobot_ethercat_cia402::cia402::DriveState;
+use microrobot_ethercat_cia402::dc::{SM_OUTPUT_PARAMETER, sub};
 
 use crate::config::{ChainConfig, ConfigError, PlantKind, TimeMode};
 use crate::esc::{SubDevice, al};
@@ -110,6 +111,16 @@ pub struct DriveSnapshot {
     pub al_status_code: u16,
     /// Configured station address, 0x0010.
     pub station_address: u16,
+    /// Sync mode, 0x1C32:01 (0 free run, 1 SM-synchronous, 2 DC SYNC0).
+    pub sync_mode: u16,
+    /// Cycle time, 0x1C32:02 (ns).
+    pub cycle_time_ns: u32,
+    /// SM-event missed counter, 0x1C32:0B.
+    pub sm_event_missed: u16,
+    /// Sync error, 0x1C32:20.
+    pub sync_error: bool,
+    /// SYNC0 events at which the drive took new outputs.
+    pub sync0_latched: u64,
 }
 
 /// An injected fault aimed at a drive that is not in the chain.
@@ -126,6 +137,7 @@ struct Chain {
     subs: Vec<SubDevice>,
     plant: Box<dyn Plant>,
     time: TimeMode,
+    dc_drift_ppm: f64,
     start: Instant,
     last_exchange: Option<Instant>,
     lose: u32,
@@ -207,6 +219,7 @@ impl Emulator {
             subs,
             plant,
             time: config.time,
+            dc_drift_ppm: config.dc_drift_ppm,
             start: Instant::now(),
             last_exchange: None,
             lose: 0,
@@ -322,6 +335,11 @@ impl Emulator {
             al_error: s.al_error(),
             al_status_code: s.al_status_code(),
             station_address: s.station_address(),
+            sync_mode: od.u16(SM_OUTPUT_PARAMETER, sub::SYNC_MODE),
+            cycle_time_ns: od.u32(SM_OUTPUT_PARAMETER, sub::CYCLE_TIME),
+            sm_event_missed: od.u16(SM_OUTPUT_PARAMETER, sub::SM_EVENT_MISSED),
+            sync_error: od.u8(SM_OUTPUT_PARAMETER, sub::SYNC_ERROR) != 0,
+            sync0_latched: s.sync0_latched,
         })
     }
 
@@ -370,8 +388,49 @@ fn parse(frame: &[u8]) -> Option<Vec<Datagram>> {
 }
 
 impl Chain {
+    /// The drives' local clock (ns): the host's monotonic time since the start, off by
+    /// `dc_drift_ppm`.
     fn now_ns(&self) -> u64 {
-        self.start.elapsed().as_nanos() as u64
+        let t = self.start.elapsed().as_nanos() as u64;
+        if self.dc_drift_ppm == 0.0 {
+            return t;
+        }
+        let drift = (t as f64 * self.dc_drift_ppm * 1e-6) as i64;
+        t.saturating_add_signed(drift)
+    }
+
+    /// Whether the outputs of drives in DC SYNC0 mode take effect at SYNC0: on the wall
+    /// clock, where the drives' DC system time runs with real time. With a fixed
+    /// simulated step per exchange (lockstep, faster or slower than real time) the
+    /// plant's time is not the DC time, and the outputs take effect at the exchange.
+    fn sync0_latching(&self) -> bool {
+        matches!(self.time, TimeMode::WallClock { .. })
+    }
+
+    /// Runs the SYNC0 events up to `now` ([`SubDevice::sync0_events`]) and, if a drive
+    /// took new outputs at one, steps the drives and the plant once: a drive
+    /// synchronised to SYNC0 applies its targets at SYNC0, not at the frame's arrival.
+    /// SYNC0 events without new outputs are counted, not stepped: as without DC, a
+    /// paused master does not make the arm move (one step per exchange, as before).
+    fn sync0(&mut self, now: u64) {
+        if !self.sync0_latching() {
+            return;
+        }
+        let mut any = false;
+        for (i, s) in self.subs.iter_mut().enumerate() {
+            let before = s.sync0_latched;
+            s.sync0_events(now + HOP_NS * i as u64);
+            any |= s.sync0_latched > before;
+        }
+        if any {
+            self.step();
+        }
+    }
+
+    /// Whether a drive of the chain takes its outputs at SYNC0 (then the plant steps at
+    /// SYNC0 only).
+    fn synchronous(&self) -> bool {
+        self.sync0_latching() && self.subs.iter().any(SubDevice::latches_at_sync0)
     }
 
     /// How many SubDevices a frame reaches.
@@ -389,6 +448,7 @@ impl Chain {
     }
 
     fn check_watchdogs(&mut self, now: u64) -> Vec<usize> {
+        self.sync0(now);
         let mut expired = Vec::new();
         for (i, s) in self.subs.iter_mut().enumerate() {
             if s.check_watchdog(now) {
@@ -406,6 +466,8 @@ impl Chain {
 
     fn handle_frame(&mut self, frame: &[u8]) -> Option<Reply> {
         let now = self.now_ns();
+        // Also the SYNC0 events before this frame's arrival, with the outputs received
+        // so far.
         self.check_watchdogs(now);
         if frame.len() < 14 || u16::from_be_bytes([frame[12], frame[13]]) != ETHERCAT_ETHERTYPE {
             self.counters.ignored += 1;
@@ -509,10 +571,24 @@ impl Chain {
         logical
     }
 
-    /// One process data exchange: outputs to the drives, drives and plant one step,
-    /// inputs back.
+    /// One process data exchange: outputs to the drives (those synchronised to SYNC0
+    /// take them at SYNC0 instead), then, unless a drive is synchronised to SYNC0,
+    /// drives and plant one step and inputs back.
     fn exchange(&mut self) {
         self.counters.exchanges += 1;
+        let synchronous = self.synchronous();
+        for s in self.subs.iter_mut() {
+            if s.al_state() == al::OP && !(synchronous && s.latches_at_sync0()) {
+                s.outputs_to_objects();
+            }
+        }
+        if !synchronous {
+            self.step();
+        }
+    }
+
+    /// Drives and plant one step (targets as last taken), inputs into SM3.
+    fn step(&mut self) {
         let dt = match self.time {
             TimeMode::PerExchange { cycle_s } => cycle_s,
             TimeMode::WallClock { max_step_s } => {
@@ -530,9 +606,7 @@ impl Chain {
         let mut braked = vec![true; n];
         for (i, s) in self.subs.iter_mut().enumerate() {
             let op = s.al_state() == al::OP;
-            if op {
-                s.outputs_to_objects();
-            } else {
+            if !op {
                 s.drive.outputs_lost();
             }
             let (tau, brake) = s

@@ -7,6 +7,7 @@ use crate::config::DriveConfig;
 use crate::drive::Drive;
 use crate::od::MappedObject;
 use crate::sii::{self, MBX_IN_START, MBX_OUT_START, MBX_SIZE};
+use microrobot_ethercat_cia402::dc::{SM_INPUT_PARAMETER, SM_OUTPUT_PARAMETER, sub, sync_mode};
 
 /// ESC memory: 4 KiB registers plus 4 KiB process RAM.
 pub(crate) const MEM_SIZE: usize = 0x2000;
@@ -36,6 +37,12 @@ pub mod al_status_code {
     pub const INVALID_OUTPUT_CONFIG: u16 = 0x001D;
     /// Invalid input configuration (SM3 does not match the TxPDO mapping).
     pub const INVALID_INPUT_CONFIG: u16 = 0x001E;
+    /// Invalid DC SYNC configuration: sync mode DC SYNC0 (0x1C32:01 = 2) without SYNC0
+    /// activated (0x0981).
+    pub const INVALID_DC_SYNC_CONFIG: u16 = 0x0030;
+    /// DC invalid sync cycle time: the SYNC0 cycle (0x09A0) is below the minimum cycle
+    /// time (0x1C32:05).
+    pub const INVALID_SYNC_CYCLE_TIME: u16 = 0x0035;
 }
 
 const REG_STATION_ADDRESS: u16 = 0x0010;
@@ -52,6 +59,11 @@ const REG_DC_PORT_TIMES: u16 = 0x0900;
 const REG_DC_SYSTEM_TIME: u16 = 0x0910;
 const REG_DC_RECEIVE_TIME: u16 = 0x0918;
 const REG_DC_OFFSET: u16 = 0x0920;
+const REG_DC_SYNC_ACTIVE: u16 = 0x0981;
+const REG_DC_SYNC_START: u16 = 0x0990;
+const REG_DC_SYNC0_CYCLE: u16 = 0x09A0;
+/// 0x0981: cyclic operation enabled (bit 0) and SYNC0 activated (bit 1).
+const SYNC0_ON: u8 = 0x03;
 const REG_WATCHDOG_DIVIDER: u16 = 0x0400;
 const REG_WATCHDOG_PD: u16 = 0x0420;
 const REG_WATCHDOG_STATUS: u16 = 0x0440;
@@ -96,6 +108,16 @@ pub(crate) struct SubDevice {
     /// When the outputs (SM2) were last written in OP, or OP was entered: the process
     /// data watchdog's start (local clock, ns). `None` outside OP.
     outputs_written_ns: Option<u64>,
+    /// System time (ns) up to which SYNC0 events are accounted for, while the outputs
+    /// are latched at SYNC0 ([`SubDevice::latches_at_sync0`]); `None` otherwise.
+    sync0_seen: Option<u64>,
+    /// Outputs (SM2) written since the last SYNC0 event.
+    outputs_fresh: bool,
+    /// SYNC0 events that latched outputs since power on.
+    pub sync0_latched: u64,
+    /// When SM2 was last written (local clock, ns), for the SM-synchronous mode's
+    /// cycle-time-too-small count.
+    last_sm2_write_ns: Option<u64>,
 }
 
 fn overlaps(addr: u32, len: usize, reg: u16, reg_len: u32) -> bool {
@@ -114,6 +136,10 @@ impl SubDevice {
             rx_layout: Vec::new(),
             tx_layout: Vec::new(),
             outputs_written_ns: None,
+            sync0_seen: None,
+            outputs_fresh: false,
+            sync0_latched: 0,
+            last_sm2_write_ns: None,
         };
         // Type, revision, build; FMMUs, SMs, RAM size (KiB), ports 0 and 1 MII.
         s.mem[0x0000] = 0x11;
@@ -151,6 +177,16 @@ impl SubDevice {
         u16::from_le_bytes([self.mem[r], self.mem[r + 1]])
     }
 
+    fn u32(&self, reg: u16) -> u32 {
+        let r = usize::from(reg);
+        u32::from_le_bytes([
+            self.mem[r],
+            self.mem[r + 1],
+            self.mem[r + 2],
+            self.mem[r + 3],
+        ])
+    }
+
     fn u64(&self, reg: u16) -> u64 {
         let r = usize::from(reg);
         let mut b = [0u8; 8];
@@ -175,6 +211,8 @@ impl SubDevice {
     pub fn set_al(&mut self, state: u8, error: bool, code: u16) {
         if state != al::OP {
             self.outputs_written_ns = None;
+            self.sync0_seen = None;
+            self.outputs_fresh = false;
         }
         self.mem[REG_AL_STATUS as usize] = state | if error { 0x10 } else { 0 };
         self.put(REG_AL_STATUS_CODE, &code.to_le_bytes());
@@ -336,9 +374,13 @@ impl SubDevice {
             (_, al::INIT) => Ok(al::INIT),
             (al::INIT, al::PRE_OP) => self.check_mailbox().map(|_| al::PRE_OP),
             (al::PRE_OP | al::SAFE_OP | al::OP, al::PRE_OP) => Ok(al::PRE_OP),
-            (al::PRE_OP, al::SAFE_OP) => self.freeze_process_data().map(|_| al::SAFE_OP),
+            (al::PRE_OP, al::SAFE_OP) => self.freeze_process_data().map(|_| {
+                self.reset_sync_counters();
+                al::SAFE_OP
+            }),
             (al::SAFE_OP | al::OP, al::SAFE_OP) => Ok(al::SAFE_OP),
-            (al::SAFE_OP | al::OP, al::OP) => Ok(al::OP),
+            (al::SAFE_OP, al::OP) => self.check_sync_config().map(|_| al::OP),
+            (al::OP, al::OP) => Ok(al::OP),
             (_, al::BOOT) => Err(code::BOOTSTRAP_NOT_SUPPORTED),
             (_, al::SAFE_OP | al::OP) => Err(code::INVALID_STATE_CHANGE),
             _ => Err(code::UNKNOWN_STATE),
@@ -352,6 +394,109 @@ impl SubDevice {
                 self.set_al(state, false, 0);
             }
             Err(c) => self.set_al(current, true, c),
+        }
+    }
+
+    /// SAFE-OP to OP with sync mode DC SYNC0 (0x1C32:01 = 2): SYNC0 must be activated
+    /// (0x0981 bits 0 and 1) at a cycle (0x09A0) no shorter than the minimum cycle time
+    /// (0x1C32:05), ETG.1020 / ETG.1000.6 table 11.
+    fn check_sync_config(&self) -> Result<(), u16> {
+        if self.drive.od.u16(SM_OUTPUT_PARAMETER, sub::SYNC_MODE) != sync_mode::DC_SYNC0 {
+            return Ok(());
+        }
+        let Some((_, cycle)) = self.sync0() else {
+            return Err(al_status_code::INVALID_DC_SYNC_CONFIG);
+        };
+        if cycle < u64::from(self.drive.od.u32(SM_OUTPUT_PARAMETER, sub::MIN_CYCLE_TIME)) {
+            return Err(al_status_code::INVALID_SYNC_CYCLE_TIME);
+        }
+        Ok(())
+    }
+
+    /// SYNC0 start time (0x0990, system time) and cycle (0x09A0, ns) if activated.
+    fn sync0(&self) -> Option<(u64, u64)> {
+        let cycle = u64::from(self.u32(REG_DC_SYNC0_CYCLE));
+        (self.mem[usize::from(REG_DC_SYNC_ACTIVE)] & SYNC0_ON == SYNC0_ON && cycle > 0)
+            .then(|| (self.u64(REG_DC_SYNC_START), cycle))
+    }
+
+    /// Whether the drive takes its outputs at SYNC0 rather than at the frame: in OP,
+    /// sync mode DC SYNC0, SYNC0 activated.
+    pub fn latches_at_sync0(&self) -> bool {
+        self.al_state() == al::OP
+            && self.drive.od.u16(SM_OUTPUT_PARAMETER, sub::SYNC_MODE) == sync_mode::DC_SYNC0
+            && self.sync0().is_some()
+    }
+
+    /// The SYNC0 events up to local time `now_ns` not yet accounted for (ETG.1020 DC
+    /// synchronous mode): at the first one the newest outputs received (SM2) are copied
+    /// into the RxPDO objects; every event with no new outputs since the previous one
+    /// counts in 0x1C32:0B (SM-event missed) and sets 0x1C32:20 (sync error). Returns
+    /// the number of events (0 when the outputs are not latched at SYNC0). A system
+    /// time stepped back fires no event twice (the ESC's next pulse time stays).
+    pub fn sync0_events(&mut self, now_ns: u64) -> u64 {
+        if !self.latches_at_sync0() {
+            self.sync0_seen = None;
+            return 0;
+        }
+        let Some((start, cycle)) = self.sync0() else {
+            return 0;
+        };
+        let sys = now_ns.wrapping_add(self.u64(REG_DC_OFFSET));
+        let Some(seen) = self.sync0_seen else {
+            // Entered OP (or SYNC0 activated) since: events from here on.
+            self.sync0_seen = Some(sys);
+            return 0;
+        };
+        if sys <= seen {
+            return 0;
+        }
+        // Events at start + k·cycle (k >= 0) in (seen, sys].
+        let upto = |t: u64| {
+            if t < start {
+                0
+            } else {
+                (t - start) / cycle + 1
+            }
+        };
+        let events = upto(sys) - upto(seen);
+        self.sync0_seen = Some(sys);
+        if events == 0 {
+            return 0;
+        }
+        let missed = if self.outputs_fresh {
+            self.outputs_to_objects();
+            self.outputs_fresh = false;
+            self.sync0_latched += 1;
+            events - 1
+        } else {
+            events
+        };
+        if missed > 0 {
+            self.count(sub::SM_EVENT_MISSED, missed);
+            for index in [SM_OUTPUT_PARAMETER, SM_INPUT_PARAMETER] {
+                self.drive.od.set(index, sub::SYNC_ERROR, &[1]);
+            }
+        }
+        events
+    }
+
+    /// Adds `n` to counter `sub` of 0x1C32 and 0x1C33 (saturating at u16::MAX).
+    fn count(&mut self, sub: u8, n: u64) {
+        for index in [SM_OUTPUT_PARAMETER, SM_INPUT_PARAMETER] {
+            let v = u64::from(self.drive.od.u16(index, sub)).saturating_add(n);
+            let v = u16::try_from(v).unwrap_or(u16::MAX);
+            self.drive.od.set(index, sub, &v.to_le_bytes());
+        }
+    }
+
+    /// The sync counters and the sync error start from zero (PRE-OP to SAFE-OP).
+    fn reset_sync_counters(&mut self) {
+        for index in [SM_OUTPUT_PARAMETER, SM_INPUT_PARAMETER] {
+            for s in [sub::SM_EVENT_MISSED, sub::CYCLE_TIME_TOO_SMALL] {
+                self.drive.od.set(index, s, &0u16.to_le_bytes());
+            }
+            self.drive.od.set(index, sub::SYNC_ERROR, &[0]);
         }
     }
 
@@ -445,6 +590,17 @@ impl SubDevice {
         }
         if did_write && self.al_state() == al::OP {
             self.outputs_written_ns = Some(now_ns);
+            self.outputs_fresh = true;
+            let mode = self.drive.od.u16(SM_OUTPUT_PARAMETER, sub::SYNC_MODE);
+            let min = u64::from(self.drive.od.u32(SM_OUTPUT_PARAMETER, sub::MIN_CYCLE_TIME));
+            if mode == sync_mode::SM_SYNCHRONOUS
+                && self
+                    .last_sm2_write_ns
+                    .is_some_and(|t| now_ns.saturating_sub(t) < min)
+            {
+                self.count(sub::CYCLE_TIME_TOO_SMALL, 1);
+            }
+            self.last_sm2_write_ns = Some(now_ns);
             // Watchdog status (0x0440 bit 0): process data active, not expired.
             self.mem[usize::from(REG_WATCHDOG_STATUS)] |= 0x01;
         }
@@ -607,6 +763,186 @@ mod tests {
             s.drive.control(true, 0.0, 0.0);
         }
         assert_eq!(s.drive.state(), DriveState::OperationEnabled);
+    }
+
+    /// A drive in SAFE-OP with SM2 (8 bytes at 0x1000) and SM3 (14 bytes at 0x1100)
+    /// mapped, FMMU 0 writing logical 0..8 into SM2.
+    fn safe_op() -> SubDevice {
+        let mut s = SubDevice::new(&DriveConfig::seed_axis(0));
+        let sm = |start: u16, len: u16, control: u8| {
+            let mut b = [0u8; 8];
+            b[..2].copy_from_slice(&start.to_le_bytes());
+            b[2..4].copy_from_slice(&len.to_le_bytes());
+            b[4] = control;
+            b[6] = 1;
+            b
+        };
+        assert!(s.write(REG_SM + 16, &sm(0x1000, 8, 0x64), 0));
+        assert!(s.write(REG_SM + 24, &sm(0x1100, 14, 0x20), 0));
+        let mut f = [0u8; 16];
+        f[4..6].copy_from_slice(&8u16.to_le_bytes());
+        f[7] = 7;
+        f[8..10].copy_from_slice(&0x1000u16.to_le_bytes());
+        f[11] = 0x02;
+        f[12] = 1;
+        assert!(s.write(REG_FMMU, &f, 0));
+        s.set_al(al::PRE_OP, false, 0);
+        s.freeze_process_data().expect("mapping");
+        s.set_al(al::SAFE_OP, false, 0);
+        s
+    }
+
+    /// SYNC0 at `start` every `cycle` ns, activated.
+    fn sync0_on(s: &mut SubDevice, start: u64, cycle: u32) {
+        assert!(s.write(REG_DC_SYNC_START, &start.to_le_bytes(), 0));
+        assert!(s.write(REG_DC_SYNC0_CYCLE, &cycle.to_le_bytes(), 0));
+        assert!(s.write(REG_DC_SYNC_ACTIVE, &[SYNC0_ON], 0));
+    }
+
+    fn request(s: &mut SubDevice, state: u8) -> (u8, bool, u16) {
+        assert!(s.write(REG_AL_CONTROL, &[state | 0x10, 0], 0));
+        (s.al_state(), s.al_error(), s.al_status_code())
+    }
+
+    /// Outputs through the FMMU: controlword 0x000F, target torque `torque`.
+    fn outputs(s: &mut SubDevice, torque: i16, now: u64) {
+        let mut d = [0u8; 8];
+        d[..2].copy_from_slice(&0x000Fu16.to_le_bytes());
+        d[2..4].copy_from_slice(&torque.to_le_bytes());
+        assert_eq!(s.logical(0, &mut d, false, true, now), 1);
+    }
+
+    #[test]
+    fn sm_parameter_objects_read_write_and_abort_as_etg_1020_says() {
+        use crate::od::abort;
+        let mut s = safe_op();
+        let od = &mut s.drive.od;
+        for index in [SM_OUTPUT_PARAMETER, SM_INPUT_PARAMETER] {
+            assert_eq!(od.u16(index, sub::SYNC_MODE), sync_mode::FREE_RUN);
+            assert_eq!(od.u16(index, sub::SYNC_MODES_SUPPORTED), 0x0007);
+            assert_eq!(od.u32(index, sub::MIN_CYCLE_TIME), 125_000);
+            assert_eq!(od.u32(index, sub::CALC_AND_COPY_TIME), 20_000);
+            assert_eq!(od.u8(index, 0), 0x20);
+            // Supported modes are written in PRE-OP; others are refused.
+            assert_eq!(
+                od.download(index, sub::SYNC_MODE, &2u16.to_le_bytes(), true),
+                Ok(())
+            );
+            assert_eq!(
+                od.download(index, sub::SYNC_MODE, &3u16.to_le_bytes(), true),
+                Err(abort::VALUE_RANGE),
+                "SYNC1 is not in 0x{index:04X}:04"
+            );
+            assert_eq!(
+                od.download(index, sub::SYNC_MODE, &0u16.to_le_bytes(), false),
+                Err(abort::DEVICE_STATE),
+                "PRE-OP only"
+            );
+            assert_eq!(
+                od.download(index, sub::SYNC_MODE, &[2], true),
+                Err(abort::LENGTH_MISMATCH)
+            );
+            assert_eq!(
+                od.download(index, sub::CYCLE_TIME, &1_000_000u32.to_le_bytes(), false),
+                Ok(())
+            );
+            assert_eq!(od.u32(index, sub::CYCLE_TIME), 1_000_000);
+            for ro in [
+                sub::SYNC_MODES_SUPPORTED,
+                sub::MIN_CYCLE_TIME,
+                sub::SM_EVENT_MISSED,
+            ] {
+                let len = od.upload(index, ro).expect("exists").len();
+                assert_eq!(
+                    od.download(index, ro, &vec![0; len], true),
+                    Err(abort::READ_ONLY)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn op_with_dc_sync0_mode_needs_sync0_activated_at_a_cycle_the_drive_supports() {
+        let mut s = safe_op();
+        s.drive
+            .od
+            .download(
+                SM_OUTPUT_PARAMETER,
+                sub::SYNC_MODE,
+                &2u16.to_le_bytes(),
+                true,
+            )
+            .expect("DC mode");
+        assert_eq!(
+            request(&mut s, al::OP),
+            (al::SAFE_OP, true, al_status_code::INVALID_DC_SYNC_CONFIG)
+        );
+        sync0_on(&mut s, 0, 100_000);
+        assert_eq!(
+            request(&mut s, al::OP),
+            (al::SAFE_OP, true, al_status_code::INVALID_SYNC_CYCLE_TIME),
+            "100 µs is below the 125 µs minimum"
+        );
+        sync0_on(&mut s, 0, 1_000_000);
+        assert_eq!(request(&mut s, al::OP), (al::OP, false, 0));
+        // Free run needs no SYNC0.
+        let mut s = safe_op();
+        assert_eq!(request(&mut s, al::OP), (al::OP, false, 0));
+    }
+
+    #[test]
+    fn outputs_take_effect_at_sync0_and_a_sync0_without_new_outputs_is_missed() {
+        let mut s = safe_op();
+        s.drive
+            .od
+            .download(
+                SM_OUTPUT_PARAMETER,
+                sub::SYNC_MODE,
+                &2u16.to_le_bytes(),
+                true,
+            )
+            .expect("DC mode");
+        // SYNC0 every 1 ms from system time 0 (the DC offset is 0: local = system).
+        sync0_on(&mut s, 0, 1_000_000);
+        assert_eq!(request(&mut s, al::OP), (al::OP, false, 0));
+        let torque = |s: &SubDevice| s.drive.od.u16(0x6071, 0) as i16;
+        let missed = |s: &SubDevice| s.drive.od.u16(SM_OUTPUT_PARAMETER, sub::SM_EVENT_MISSED);
+        assert_eq!(s.sync0_events(100_000), 0, "tracking starts in OP");
+        outputs(&mut s, 100, 200_000);
+        assert_eq!(torque(&s), 0, "not at the frame's arrival");
+        assert_eq!(s.sync0_events(999_999), 0);
+        assert_eq!(torque(&s), 0);
+        assert_eq!(s.sync0_events(1_000_000), 1);
+        assert_eq!(torque(&s), 100, "taken at SYNC0");
+        assert_eq!((missed(&s), s.sync0_latched), (0, 1));
+        // Two frames before one SYNC0: the newer counts, nothing is missed.
+        outputs(&mut s, 200, 1_100_000);
+        outputs(&mut s, 300, 1_900_000);
+        assert_eq!(s.sync0_events(2_000_500), 1);
+        assert_eq!((torque(&s), missed(&s)), (300, 0));
+        assert_eq!(s.drive.od.u8(SM_OUTPUT_PARAMETER, sub::SYNC_ERROR), 0);
+        // No frame before the next SYNC0: missed, sync error.
+        assert_eq!(s.sync0_events(3_000_000), 1);
+        assert_eq!(missed(&s), 1);
+        assert_eq!(s.drive.od.u8(SM_OUTPUT_PARAMETER, sub::SYNC_ERROR), 1);
+        // A frame, then three SYNC0 events at once: one takes it, two are missed.
+        outputs(&mut s, -50, 3_500_000);
+        assert_eq!(s.sync0_events(6_000_000), 3);
+        assert_eq!((torque(&s), missed(&s)), (-50, 3));
+        assert_eq!(s.drive.od.u16(SM_INPUT_PARAMETER, sub::SM_EVENT_MISSED), 3);
+        // A system time stepped back fires no event twice.
+        assert!(s.write(REG_DC_OFFSET, &(-500_000i64).to_le_bytes(), 0));
+        outputs(&mut s, 7, 6_100_000);
+        assert_eq!(s.sync0_events(6_400_000), 0, "system time 5.9 ms");
+        assert_eq!(s.sync0_events(7_000_000), 0, "system time 6.5 ms");
+        assert_eq!(s.sync0_events(7_500_000), 1, "system time 7.0 ms");
+        assert_eq!((torque(&s), missed(&s)), (7, 3));
+        // Out of OP and back through PRE-OP: the counters start from zero.
+        assert_eq!(request(&mut s, al::PRE_OP).0, al::PRE_OP);
+        s.freeze_process_data().expect("mapping");
+        s.reset_sync_counters();
+        assert_eq!(missed(&s), 0);
+        assert_eq!(s.sync0_events(9_000_000), 0, "not in OP");
     }
 
     #[test]

@@ -4,6 +4,8 @@
 
 use std::collections::BTreeMap;
 
+use microrobot_ethercat_cia402::dc::{self, SM_INPUT_PARAMETER, SM_OUTPUT_PARAMETER};
+
 /// SDO abort codes (CiA 301 7.2.4.3.17, ETG.1000.6 table 41) the server answers with.
 pub mod abort {
     /// Client/server command specifier not valid or unknown.
@@ -173,6 +175,15 @@ impl ObjectDictionary {
             if sub == 0 {
                 let n = data.first().copied().unwrap_or(0);
                 self.check_pdo_object(index, n)?;
+            }
+        }
+        if matches!(index, SM_OUTPUT_PARAMETER | SM_INPUT_PARAMETER) && sub == dc::sub::SYNC_MODE {
+            let mode = u16::from_le_bytes([
+                data.first().copied().unwrap_or(0),
+                data.get(1).copied().unwrap_or(0),
+            ]);
+            if !dc::sync_mode_supported(self.u16(index, dc::sub::SYNC_MODES_SUPPORTED), mode) {
+                return Err(abort::VALUE_RANGE);
             }
         }
         if index == 0x6060 {

@@ -339,3 +339,44 @@ fn csp_mode_follows_the_target_position() {
         assert_eq!(b.emulator.drive(0).expect("drive 0").mode, MODE_CSP);
     });
 }
+
+/// The SyncManager parameters over CoE (ETG.1020): read, a sync mode the drive does not
+/// offer aborted, DC SYNC0 written in PRE-OP; without SYNC0 activated the drive then
+/// refuses OP with AL status code 0x0030.
+#[test]
+fn dc_sync_mode_over_coe_and_op_refused_without_sync0() {
+    let b = bus(&ChainConfig::inertia_chain(1));
+    let md = &b.maindevice;
+    block_on(async {
+        let group = md
+            .init_single_group::<MAX_SUBDEVICES, PDI_LEN>(ethercat_now)
+            .await
+            .expect("discovery to PRE-OP");
+        let sd = group.subdevice(md, 0).expect("drive 0");
+        assert_eq!(sd.sdo_read::<u16>(0x1C32, 4).await, Ok(0x0007));
+        assert_eq!(sd.sdo_read::<u32>(0x1C32, 5).await, Ok(125_000));
+        assert_eq!(sd.sdo_read::<u16>(0x1C33, 1).await, Ok(0));
+        match sd.sdo_write(0x1C32, 1, 3u16).await {
+            Err(Error::Mailbox(MailboxError::Aborted { code, .. })) => {
+                assert_eq!(u32::from(code), 0x0609_0030, "SYNC1 not offered")
+            }
+            other => panic!("sync mode 3: {other:?}"),
+        }
+        match sd.sdo_write(0x1C32, 5, 1000u32).await {
+            Err(Error::Mailbox(MailboxError::Aborted { code, .. })) => {
+                assert_eq!(u32::from(code), 0x0601_0002, "read only")
+            }
+            other => panic!("minimum cycle time: {other:?}"),
+        }
+        sd.sdo_write(0x1C32, 1, 2u16).await.expect("DC SYNC0");
+        sd.sdo_write(0x1C32, 2, 1_000_000u32).await.expect("cycle");
+        assert_eq!(sd.sdo_read::<u16>(0x1C32, 1).await, Ok(2));
+        assert!(group.into_op(md).await.is_err(), "no SYNC0: no OP");
+    });
+    let d = b.emulator.drive(0).expect("drive 0");
+    assert_eq!(
+        (d.al_state, d.al_error, d.al_status_code),
+        (4, true, 0x0030),
+        "SAFE-OP, invalid DC SYNC configuration"
+    );
+}
