@@ -90,8 +90,9 @@ pub struct StatusMonitor {
     expected: [Option<u32>; 3],
     /// The publisher found to belong to the expected process, per role.
     owner: [Option<u128>; 3],
-    /// Refused origins already reported: (slot, publisher, claimed pid).
-    reported: Vec<(usize, u128, u32)>,
+    /// Refused origins already reported, (slot, publisher, claimed pid), each with
+    /// whether it is settled as another process's (else looked up again).
+    reported: Vec<((usize, u128, u32), bool)>,
     /// Refusals not yet taken by [`Self::take_refused`].
     refused: Vec<Refused>,
 }
@@ -140,8 +141,9 @@ impl StatusMonitor {
     }
 
     /// Whether `st`, sent by `publisher`, counts for slot `i` (see [`Self::expect`]).
-    /// Looks the publisher's process up once: the verdict is kept for the owner and for
-    /// each refused origin.
+    /// Looks the publisher's process up once per origin: the owner and each origin found
+    /// to be another process's are remembered; a publisher not found (gone, or not yet
+    /// listed) is looked up again at its next status.
     fn admits(&mut self, i: usize, role: ServiceRole, st: &ServiceStatus, publisher: u128) -> bool {
         let Some(expected) = self.expected[i] else {
             return true;
@@ -150,7 +152,10 @@ impl StatusMonitor {
             return true;
         }
         let key = (i, publisher, st.pid);
-        if self.reported.contains(&key) {
+        let seen = self.reported.iter().position(|(k, _)| *k == key);
+        if let Some(n) = seen
+            && self.reported[n].1
+        {
             return false;
         }
         let by = publisher_pid(&self.service, publisher);
@@ -158,14 +163,20 @@ impl StatusMonitor {
             self.owner[i] = Some(publisher);
             return true;
         }
-        if self.reported.len() < REPORTED_MAX {
-            self.reported.push(key);
-            self.refused.push(Refused {
-                role,
-                claimed_pid: st.pid,
-                publisher_pid: by,
-                expected_pid: expected,
-            });
+        // Another process's for certain: it claims another pid, or its publisher is.
+        let settled = st.pid != expected || by.is_some();
+        match seen {
+            Some(n) => self.reported[n].1 = settled,
+            None if self.reported.len() < REPORTED_MAX => {
+                self.reported.push((key, settled));
+                self.refused.push(Refused {
+                    role,
+                    claimed_pid: st.pid,
+                    publisher_pid: by,
+                    expected_pid: expected,
+                });
+            }
+            None => {}
         }
         false
     }
