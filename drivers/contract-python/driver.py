@@ -37,7 +37,7 @@ class Header(ctypes.Structure):
 
     @staticmethod
     def type_name():
-        return "microrobot::v1::Header"
+        return "microrobot::v2::Header"
 
 
 class TorqueCommand(ctypes.Structure):
@@ -46,7 +46,7 @@ class TorqueCommand(ctypes.Structure):
 
     @staticmethod
     def type_name():
-        return "microrobot::v1::TorqueCommand"
+        return "microrobot::v2::TorqueCommand"
 
 
 class JointState(ctypes.Structure):
@@ -56,7 +56,7 @@ class JointState(ctypes.Structure):
 
     @staticmethod
     def type_name():
-        return "microrobot::v1::JointState"
+        return "microrobot::v2::JointState"
 
 
 class MotionCommand(ctypes.Structure):
@@ -66,7 +66,7 @@ class MotionCommand(ctypes.Structure):
 
     @staticmethod
     def type_name():
-        return "microrobot::v1::MotionCommand"
+        return "microrobot::v2::MotionCommand"
 
 
 class LatencySummary(ctypes.Structure):
@@ -104,7 +104,7 @@ class ServiceStatus(ctypes.Structure):
 
     @staticmethod
     def type_name():
-        return "microrobot::v1::ServiceStatus"
+        return "microrobot::v2::ServiceStatus"
 
 
 def _check_layout():
@@ -146,7 +146,7 @@ def monotonic_ns():
 
 # ---------------------------------------------------------------- ports (page: "Services", "QoS")
 def service_name(instance, stream):
-    return iox2.ServiceName.new(f"microrobot/v1/{instance}/{stream}")
+    return iox2.ServiceName.new(f"microrobot/v2/{instance}/{stream}")
 
 
 def open_publish_subscribe(node, instance, stream, payload):

@@ -88,7 +88,7 @@ impl TargetSpace {
 /// command is counted and reported in its status and never moves the arm.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("microrobot::v1::MotionCommand")]
+#[type_name("microrobot::v2::MotionCommand")]
 pub struct MotionCommand {
     /// Sender's sequence number (echoed in the planner's status as the last command seen).
     pub seq: u64,

@@ -5,7 +5,7 @@
 //! Everything here is plain data that any language's iceoryx2 binding can read:
 //! fixed-width numbers, fixed arrays and nested `#[repr(C)]` structs, no `usize`, no Rust
 //! enums, no pointers. Every payload carries an explicit, versioned type name
-//! (`microrobot::v1::...`): a build with another contract version cannot open the
+//! (`microrobot::v2::...`): a build with another contract version cannot open the
 //! services (iceoryx2 refuses the type with `IncompatibleTypes`).
 //!
 //! All values are SI (rad or m, rad/s, N·m or N, ns of `CLOCK_MONOTONIC`). See
@@ -38,7 +38,7 @@ pub const MAX_JOINTS: usize = 8;
 
 /// Version of this contract. It is part of every type name and every service name, so
 /// two builds with different contracts never exchange data.
-pub const CONTRACT_VERSION: u32 = 1;
+pub const CONTRACT_VERSION: u32 = 2;
 
 /// Reads `CLOCK_MONOTONIC` in nanoseconds: the time base of every timestamp on the bus.
 pub fn monotonic_ns() -> u64 {

@@ -10,7 +10,7 @@ use iceoryx2::prelude::ZeroCopySend;
 /// numbers are not finite or whose quaternion is not unit length (±1e-3).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("microrobot::v1::MasterPose")]
+#[type_name("microrobot::v2::MasterPose")]
 pub struct MasterPose {
     /// Device sequence number, +1 per sample; a gap is a lost sample.
     pub seq: u64,

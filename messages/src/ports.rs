@@ -82,7 +82,7 @@ pub enum BusError {
     Open { name: String, reason: String },
 }
 
-/// The full service name of `kind` in pipeline `instance`: `microrobot/v1/<instance>/<stream>`.
+/// The full service name of `kind` in pipeline `instance`: `microrobot/v2/<instance>/<stream>`.
 pub fn service_name(instance: &str, kind: ServiceKind) -> String {
     format!(
         "microrobot/v{CONTRACT_VERSION}/{instance}/{}",

@@ -414,7 +414,7 @@ impl ProgramEnd {
 /// Percentiles of a latency histogram, in ns (0 when no sample yet).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("microrobot::v1::LatencySummary")]
+#[type_name("microrobot::v2::LatencySummary")]
 pub struct LatencySummary {
     pub count: u64,
     pub p50_ns: u64,
@@ -429,7 +429,7 @@ pub struct LatencySummary {
 /// consecutive hops add up exactly) and percentiles of its histogram (0 when empty).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("microrobot::v1::HopLatency")]
+#[type_name("microrobot::v2::HopLatency")]
 pub struct HopLatency {
     pub count: u64,
     pub sum_ns: u64,
@@ -449,7 +449,7 @@ pub const COMMAND_VERDICTS: usize = 16;
 /// The planner's verdict on one motion command ([`ServiceStatus::command_verdicts`]).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, ZeroCopySend)]
-#[type_name("microrobot::v1::CommandVerdict")]
+#[type_name("microrobot::v2::CommandVerdict")]
 pub struct CommandVerdict {
     /// The command's `MotionCommand::seq`.
     pub seq: u64,
@@ -477,7 +477,7 @@ pub enum VerdictLookup {
 /// Health and counters of one service. Counters are cumulative since the process started.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("microrobot::v1::ServiceStatus")]
+#[type_name("microrobot::v2::ServiceStatus")]
 pub struct ServiceStatus {
     /// Sequence number of this status message.
     pub seq: u64,

@@ -8,7 +8,7 @@ use crate::MAX_JOINTS;
 /// make end-to-end latency and gaps measurable instead of guessed.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("microrobot::v1::Header")]
+#[type_name("microrobot::v2::Header")]
 pub struct Header {
     /// Per-publisher sequence number, +1 per message; a gap is a lost message.
     pub seq: u64,
@@ -24,7 +24,7 @@ pub struct Header {
 /// Planner → dynamics (and monitors): the desired joint motion at one tick.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("microrobot::v1::JointSetpoint")]
+#[type_name("microrobot::v2::JointSetpoint")]
 pub struct JointSetpoint {
     pub header: Header,
     /// Position (rad, or m for prismatic joints).
@@ -90,7 +90,7 @@ pub mod setpoint_flags {
 /// Dynamics → actuator: the joint torques (forces for prismatic joints) to apply.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("microrobot::v1::TorqueCommand")]
+#[type_name("microrobot::v2::TorqueCommand")]
 pub struct TorqueCommand {
     /// `header.tick` and `header.source_stamp_ns` are copied from the setpoint used.
     pub header: Header,
@@ -130,7 +130,7 @@ pub mod torque_flags {
 /// Actuator → planner and dynamics: the measured joint state.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("microrobot::v1::JointState")]
+#[type_name("microrobot::v2::JointState")]
 pub struct JointState {
     /// `header.tick`/`source_stamp_ns` come from the torque command last applied.
     pub header: Header,

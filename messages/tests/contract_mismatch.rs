@@ -7,7 +7,7 @@ use microrobot_messages::{BusError, JointSetpoint, ServiceKind, open_publish_sub
 /// What a build whose setpoint changed shape without a new contract version would send.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
-#[type_name("microrobot::v1::JointSetpoint")]
+#[type_name("microrobot::v2::JointSetpoint")]
 struct ReshapedSetpoint {
     q: [f64; 6],
 }
@@ -15,7 +15,7 @@ struct ReshapedSetpoint {
 /// What a build of the next contract version would send on the same name.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, ZeroCopySend)]
-#[type_name("microrobot::v2::JointSetpoint")]
+#[type_name("microrobot::v3::JointSetpoint")]
 struct NextVersionSetpoint {
     q: [f64; 8],
 }
@@ -29,12 +29,12 @@ fn node() -> Node<ipc::Service> {
 
 fn refused<T: std::fmt::Debug + ZeroCopySend + 'static>(node: &Node<ipc::Service>, inst: &str) {
     match open_publish_subscribe::<T>(node, inst, ServiceKind::Setpoint) {
-        Ok(_) => panic!("{} opened a v1 service", std::any::type_name::<T>()),
+        Ok(_) => panic!("{} opened a v2 service", std::any::type_name::<T>()),
         Err(e @ BusError::Open { .. }) => {
             let msg = e.to_string();
             assert!(msg.contains("different contract version"), "{msg}");
             assert!(
-                msg.contains(&format!("microrobot/v1/{inst}/setpoint")),
+                msg.contains(&format!("microrobot/v2/{inst}/setpoint")),
                 "{msg}"
             );
         }

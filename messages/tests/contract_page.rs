@@ -13,7 +13,7 @@ struct Section {
     rows: Vec<(usize, String)>,
 }
 
-/// `### \`Name\` (\`microrobot::v1::Name\`, 296 B ...` headings and the `| offset | field |`
+/// `### \`Name\` (\`microrobot::v2::Name\`, 296 B ...` headings and the `| offset | field |`
 /// tables under them.
 fn sections(page: &str) -> Vec<Section> {
     let mut out: Vec<Section> = Vec::new();
@@ -113,7 +113,7 @@ fn every_offset_table_on_the_contract_page_matches_the_compiled_payload() {
 
 #[test]
 fn the_page_parser_sees_a_wrong_offset() {
-    let page = "### `Header` (`microrobot::v1::Header`, 32 B) — x\n\
+    let page = "### `Header` (`microrobot::v2::Header`, 32 B) — x\n\
                 | offset | field | type | meaning |\n|---|---|---|---|\n\
                 | 0 | `seq` | u64 | |\n| 8 | `tick` | u64 | |\n\
                 | 24 | `stamp_ns` | u64 | |\n| 24 | `source_stamp_ns` | u64 | |\n";

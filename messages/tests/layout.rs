@@ -118,6 +118,23 @@ fn wire_enums_round_trip_and_refuse_unknown_values() {
     assert_eq!(RefusalQuantity::from_wire(6), None);
 }
 
+/// The version goes with the layouts pinned here: it is in every payload's type name,
+/// and version 2 is the one whose `ServiceStatus` is 1024 B (version 1's was 1016 B,
+/// without `hook` and `hook_budget_ms`).
+#[test]
+fn every_type_name_carries_the_contract_version() {
+    assert_eq!(CONTRACT_VERSION, 2);
+    assert_eq!(size_of::<ServiceStatus>(), 1024);
+    for t in layout::payload_layouts() {
+        assert_eq!(
+            t.type_name,
+            format!("microrobot::v{CONTRACT_VERSION}::{}", t.name),
+            "{}",
+            t.name
+        );
+    }
+}
+
 #[test]
 fn service_names_carry_version_and_instance() {
     assert_eq!(

@@ -182,6 +182,87 @@ fn a_hung_service_is_found_killed_and_named_in_the_verdict() {
 }
 
 #[test]
+fn a_forged_status_stream_does_not_keep_a_hung_service_alive() {
+    use microrobot_messages::{
+        LifecycleHook, LifecycleState, ServiceKind, ServiceStatus, monotonic_ns,
+        open_publish_subscribe,
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inst = instance("verdict-forged-status");
+    let cfg = write_config(
+        dir.path(),
+        &inst,
+        "",
+        "[supervisor]\non_failure = \"stop_all\"\nhung_ms = 400.0",
+    );
+    let proc = start(&[
+        "run",
+        "--config",
+        &s(&cfg),
+        "--no-program",
+        "--duration",
+        "30",
+    ]);
+    wait_ready(&inst, 60.0);
+    let pid = pid_of(&inst, ServiceRole::Dynamics).expect("dynamics pid");
+    let node = iceoryx2::prelude::NodeBuilder::new()
+        .signal_handling_mode(iceoryx2::prelude::SignalHandlingMode::Disabled)
+        .create::<iceoryx2::service::ipc::Service>()
+        .expect("node");
+    let publisher = open_publish_subscribe::<ServiceStatus>(&node, &inst, ServiceKind::Status)
+        .expect("status service")
+        .publisher_builder()
+        .create()
+        .expect("publisher");
+    // SAFETY: kill(2) on a child of the pipeline this test started.
+    unsafe { libc::kill(pid, libc::SIGSTOP) };
+    // Statuses in the frozen dynamics' name, announcing a hook of 600 s: were they
+    // taken, the supervisor would wait that long (the run would end at --duration).
+    let end = std::time::Instant::now() + Duration::from_secs(20);
+    let mut seq = 1_000_000;
+    while alive(pid) && std::time::Instant::now() < end {
+        seq += 1;
+        let forged = ServiceStatus {
+            seq,
+            stamp_ns: monotonic_ns(),
+            role: ServiceRole::Dynamics as u32,
+            lifecycle: LifecycleState::Active as u32,
+            pid: pid as u32,
+            ready: 1,
+            hook: LifecycleHook::Reset as u32,
+            hook_budget_ms: 600_000,
+            ..Default::default()
+        };
+        publisher.send_copy(forged).expect("send");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = proc.finish(120.0);
+    assert!(!alive(pid), "the hung process was killed");
+    assert_eq!(
+        out.code(),
+        Some(exit_code::SERVICE_FAILED as i32),
+        "stderr:\n{}",
+        out.stderr
+    );
+    assert!(
+        out.stderr
+            .contains("the dynamics service hung (its process lived but sent no status"),
+        "stderr:\n{}",
+        out.stderr
+    );
+    let warning = format!(
+        "ignoring dynamics statuses that claim pid {pid} (published by pid {})",
+        std::process::id()
+    );
+    assert_eq!(
+        out.stderr.matches(&warning).count(),
+        1,
+        "named once; stderr:\n{}",
+        out.stderr
+    );
+}
+
+#[test]
 fn a_program_abandoned_because_the_measured_state_went_stale_fails_the_run() {
     let (out, sum) = freeze_mid_program(
         "verdict-stale",

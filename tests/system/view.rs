@@ -144,11 +144,11 @@ fn a_foxglove_client_sees_the_live_arm_and_a_stalled_one_costs_the_pipeline_noth
     });
     assert_eq!(seen["server"], format!("microrobot {inst}"));
     for (topic, schema) in [
-        ("setpoint", "microrobot::v1::JointSetpoint"),
-        ("torque", "microrobot::v1::TorqueCommand"),
-        ("state", "microrobot::v1::JointState"),
-        ("command", "microrobot::v1::MotionCommand"),
-        ("status", "microrobot::v1::ServiceStatus"),
+        ("setpoint", "microrobot::v2::JointSetpoint"),
+        ("torque", "microrobot::v2::TorqueCommand"),
+        ("state", "microrobot::v2::JointState"),
+        ("command", "microrobot::v2::MotionCommand"),
+        ("status", "microrobot::v2::ServiceStatus"),
         ("scene", "foxglove.SceneUpdate"),
         ("log", "foxglove.Log"),
     ] {
@@ -161,7 +161,7 @@ fn a_foxglove_client_sees_the_live_arm_and_a_stalled_one_costs_the_pipeline_noth
         let n = ch["count"].as_u64().expect("count");
         assert!(n >= 100, "{topic}: {n} messages in 3 s at 200 Hz");
     }
-    assert!(channel(&seen, "state", "microrobot::v1::JointState")["count"].as_u64() >= Some(30));
+    assert!(channel(&seen, "state", "microrobot::v2::JointState")["count"].as_u64() >= Some(30));
 
     // Every transform: a named frame under base_link with finite values and a unit
     // quaternion; the measured tool frame is the model's FK of the joints message sent

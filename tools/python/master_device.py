@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """A stand-in for a surgeon's master device, written from the bus contract alone.
 
-Publishes `MasterPose` (messages/README.md: `microrobot::v1::MasterPose`, 96 B, align 8)
-on the `master` stream of a running pipeline, `microrobot/v1/<instance>/master`, with the
+Publishes `MasterPose` (messages/README.md: `microrobot::v2::MasterPose`, 96 B, align 8)
+on the `master` stream of a running pipeline, `microrobot/v2/<instance>/master`, with the
 contract's QoS, and `notify()`s the event service of the same name after every sample.
 The hand motion is synthetic: a sine per axis (amplitude `--amplitude-mm`, frequency
 `--frequency-hz`, starting at 0), the clutch engaged except in the `--clutch-open`
@@ -29,12 +29,12 @@ except ImportError:  # pragma: no cover - depends on the environment
     sys.exit("master_device: the iceoryx2 Python bindings are missing: "
              "pip install -r tools/python/requirements.txt (iceoryx2==0.10.0)")
 
-CONTRACT_VERSION = 1
+CONTRACT_VERSION = 2
 INSTANCE_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 
 
 class MasterPose(ctypes.Structure):
-    """`microrobot::v1::MasterPose`: the table in messages/README.md, field by field."""
+    """`microrobot::v2::MasterPose`: the table in messages/README.md, field by field."""
 
     _fields_ = [
         ("seq", ctypes.c_uint64),              # +1 per sample

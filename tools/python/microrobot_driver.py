@@ -40,7 +40,7 @@ except ImportError:  # pragma: no cover - depends on the environment
     sys.exit("microrobot_driver: the iceoryx2 Python bindings are missing: "
              "pip install -r tools/python/requirements.txt (iceoryx2==0.10.0)")
 
-CONTRACT_VERSION = 1
+CONTRACT_VERSION = 2
 MAX_JOINTS = 8
 U64_MAX = (1 << 64) - 1
 INSTANCE_RE = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
@@ -197,7 +197,7 @@ STREAMS = {"setpoint": JointSetpoint, "torque": TorqueCommand, "state": JointSta
 
 
 def service_name(instance, stream):
-    """`microrobot/v1/<instance>/<stream>`."""
+    """`microrobot/v2/<instance>/<stream>`."""
     return f"microrobot/v{CONTRACT_VERSION}/{instance}/{stream}"
 
 

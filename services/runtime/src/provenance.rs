@@ -104,8 +104,9 @@ impl Provenance {
     }
 }
 
-/// The pid of the process whose node created `publisher` of `svc`.
-fn publisher_pid<T>(
+/// The pid of the process whose node created `publisher` (an iceoryx2
+/// `UniquePublisherId` value) of `svc`; `None` once the publisher or its node is gone.
+pub fn publisher_pid<T>(
     svc: &publish_subscribe::PortFactory<ipc::Service, T, ()>,
     publisher: u128,
 ) -> Option<i32>

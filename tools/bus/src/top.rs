@@ -1,8 +1,8 @@
 //! `microrobot top`: a live view of a running pipeline. The services from their status
 //! stream: cycles/s, each one's own timing p50/p99 (planner: wake-up lateness; dynamics:
 //! setpoint → torque; actuator: end-to-end latency), misses, lost, refused, stale, faults,
-//! lifecycle, silence (a live process whose status stopped is shown as hung), the
-//! planner's e-stop latency; then what the arm does: the planner's activity (program,
+//! lifecycle, silence (a live process whose status stopped is shown as hung), a blocking
+//! lifecycle hook the actuator announced with its budget, the planner's e-stop latency; then what the arm does: the planner's activity (program,
 //! move, hold, e-stop, safe state, teleop) and program state, each joint's measured
 //! position and commanded torque, and the tool pose; then the latency budget by hop (as
 //! in the run's summary, counted since each service started). It exits when the
@@ -17,8 +17,8 @@ use anyhow::ensure;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use microrobot_messages::{
-    Activity, JointState, MAX_JOINTS, ProgramState, ServiceKind, ServiceRole, ServiceStatus,
-    TorqueCommand, open_publish_subscribe,
+    Activity, JointState, LifecycleHook, MAX_JOINTS, ProgramState, ServiceKind, ServiceRole,
+    ServiceStatus, TorqueCommand, open_publish_subscribe,
 };
 use microrobot_model::{JointKind, JointVector, ModelData, Robot};
 use serde::Serialize;
@@ -75,6 +75,11 @@ pub struct Row {
     pub age_s: f64,
     /// `ok`, `silent` (no status for over a second, process alive: hung?) or `gone`.
     pub health: &'static str,
+    /// The lifecycle hook the service's last status says it is inside (`on_reset`, …;
+    /// null when none): its cycle is blocked, and it stays silent, for up to
+    /// `hook_budget_ms`.
+    pub hook: Option<&'static str>,
+    pub hook_budget_ms: Option<u32>,
     /// What `latency_*` measures for this service.
     pub latency_is: &'static str,
 }
@@ -104,53 +109,72 @@ const ORDER: [ServiceRole; 3] = [
 ];
 
 fn rows(monitor: &StatusMonitor) -> Vec<Row> {
-    let mut out = Vec::new();
-    for role in ORDER {
-        let Some(seen) = monitor.latest[microrobot_supervisor::monitor::slot(role)] else {
-            continue;
-        };
-        let st = seen.status;
-        let us = |ns: u64| ns as f64 / 1000.0;
-        let age_s = seen.at.elapsed().as_secs_f64();
-        // SAFETY: kill with signal 0 only checks that the process exists.
-        let alive = unsafe { libc::kill(st.pid as i32, 0) } == 0;
-        let health = if age_s <= 1.0 {
-            "ok"
-        } else if alive && st.lifecycle != microrobot_messages::LifecycleState::Finalized as u32 {
-            "silent"
-        } else {
-            "gone"
-        };
-        out.push(Row {
-            service: role.name(),
-            pid: st.pid,
-            lifecycle: lifecycle_name(st.lifecycle),
-            ready: st.ready == 1,
-            cycles: st.cycles,
-            cycles_per_s: monitor.rate(role),
-            latency_p50_us: us(st.latency.p50_ns),
-            latency_p99_us: us(st.latency.p99_ns),
-            latency_max_us: us(st.latency.max_ns),
-            deadline_misses: st.deadline_misses,
-            lost_messages: st.lost_messages,
-            refused_messages: st.refused_messages,
-            stale_cycles: st.stale_cycles,
-            faults: st.faults,
-            estops: st.estops,
-            estop_latency_us: (st.estop_latency_ns > 0).then(|| us(st.estop_latency_ns)),
-            motion_time_s: st.motion_time_s,
-            cpu_time_ms: st.cpu_time_ms,
-            rss_kib: st.rss_kib,
-            age_s,
-            health,
-            latency_is: match role {
-                ServiceRole::Planner => "wake-up lateness",
-                ServiceRole::Dynamics => "setpoint → torque",
-                ServiceRole::Actuator => "end-to-end latency",
-            },
-        });
+    ORDER
+        .into_iter()
+        .filter_map(|role| {
+            let seen = monitor.latest[microrobot_supervisor::monitor::slot(role)]?;
+            Some(row(
+                role,
+                &seen.status,
+                seen.at.elapsed().as_secs_f64(),
+                monitor.rate(role),
+            ))
+        })
+        .collect()
+}
+
+/// The lifecycle hook `st` announces and its budget in ms (`None`: no hook, or one this
+/// build does not know).
+fn announced_hook(st: &ServiceStatus) -> Option<(LifecycleHook, u32)> {
+    match LifecycleHook::from_wire(st.hook)? {
+        LifecycleHook::None => None,
+        hook => Some((hook, st.hook_budget_ms)),
     }
-    out
+}
+
+/// The row of `role` whose last status `st` arrived `age_s` ago.
+fn row(role: ServiceRole, st: &ServiceStatus, age_s: f64, cycles_per_s: Option<f64>) -> Row {
+    let us = |ns: u64| ns as f64 / 1000.0;
+    // SAFETY: kill with signal 0 only checks that the process exists.
+    let alive = unsafe { libc::kill(st.pid as i32, 0) } == 0;
+    let health = if age_s <= 1.0 {
+        "ok"
+    } else if alive && st.lifecycle != microrobot_messages::LifecycleState::Finalized as u32 {
+        "silent"
+    } else {
+        "gone"
+    };
+    let hook = announced_hook(st);
+    Row {
+        service: role.name(),
+        pid: st.pid,
+        lifecycle: lifecycle_name(st.lifecycle),
+        ready: st.ready == 1,
+        cycles: st.cycles,
+        cycles_per_s,
+        latency_p50_us: us(st.latency.p50_ns),
+        latency_p99_us: us(st.latency.p99_ns),
+        latency_max_us: us(st.latency.max_ns),
+        deadline_misses: st.deadline_misses,
+        lost_messages: st.lost_messages,
+        refused_messages: st.refused_messages,
+        stale_cycles: st.stale_cycles,
+        faults: st.faults,
+        estops: st.estops,
+        estop_latency_us: (st.estop_latency_ns > 0).then(|| us(st.estop_latency_ns)),
+        motion_time_s: st.motion_time_s,
+        cpu_time_ms: st.cpu_time_ms,
+        rss_kib: st.rss_kib,
+        age_s,
+        health,
+        hook: hook.map(|(h, _)| h.name()),
+        hook_budget_ms: hook.map(|(_, ms)| ms),
+        latency_is: match role {
+            ServiceRole::Planner => "wake-up lateness",
+            ServiceRole::Dynamics => "setpoint → torque",
+            ServiceRole::Actuator => "end-to-end latency",
+        },
+    }
 }
 
 fn table(instance: &str, rows: &[Row], arm: Option<&Arm>) -> String {
@@ -175,7 +199,16 @@ fn table(instance: &str, rows: &[Row], arm: Option<&Arm>) -> String {
             .cycles_per_s
             .map(|v| format!("{v:.0}"))
             .unwrap_or_else(|| "-".into());
+        let hook = match (r.hook, r.hook_budget_ms) {
+            (Some(h), Some(ms)) => format!("  in {h} (budget {ms} ms)"),
+            _ => String::new(),
+        };
+        // Inside an announced hook, silence within its budget is expected.
+        let within_hook = r
+            .hook_budget_ms
+            .is_some_and(|ms| r.age_s * 1e3 <= f64::from(ms));
         let mark = match r.health {
+            "silent" if within_hook => format!(" silent {:.1} s", r.age_s),
             "silent" => format!(" SILENT {:.1} s (hung?)", r.age_s),
             "gone" => format!(" gone ({:.1} s ago)", r.age_s),
             _ => String::new(),
@@ -185,7 +218,7 @@ fn table(instance: &str, rows: &[Row], arm: Option<&Arm>) -> String {
             .map(|v| format!("{v:.1}"))
             .unwrap_or_else(|| "-".into());
         s.push_str(&format!(
-            "{:<9} {:>7} {:<11} {:>9} {:>9.1} {:>9.1} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9.2} {:>11}  {}{mark}\n",
+            "{:<9} {:>7} {:<11} {:>9} {:>9.1} {:>9.1} {:>7} {:>6} {:>7} {:>6} {:>6} {:>9.2} {:>11}  {}{hook}{mark}\n",
             r.service,
             r.pid,
             r.lifecycle,
@@ -448,5 +481,73 @@ pub fn main(args: TopArgs) -> anyhow::Result<()> {
             }
             std::thread::sleep(Duration::from_millis(50));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn actuator(hook: LifecycleHook, budget_ms: u32) -> ServiceStatus {
+        ServiceStatus {
+            role: ServiceRole::Actuator as u32,
+            lifecycle: microrobot_messages::LifecycleState::Active as u32,
+            // A live process: this one.
+            pid: std::process::id(),
+            ready: 1,
+            hook: hook as u32,
+            hook_budget_ms: budget_ms,
+            ..Default::default()
+        }
+    }
+
+    fn rendered(st: &ServiceStatus, age_s: f64) -> (Row, String) {
+        let r = row(ServiceRole::Actuator, st, age_s, None);
+        let t = table("t", std::slice::from_ref(&r), None);
+        let line = t
+            .lines()
+            .find(|l| l.starts_with("actuator"))
+            .expect("an actuator row")
+            .to_string();
+        (r, line)
+    }
+
+    #[test]
+    fn a_row_shows_the_hook_its_status_announces_with_the_budget() {
+        let (r, line) = rendered(&actuator(LifecycleHook::Reset, 5000), 0.2);
+        assert_eq!((r.hook, r.hook_budget_ms), (Some("on_reset"), Some(5000)));
+        assert!(line.contains("in on_reset (budget 5000 ms)"), "{line}");
+        // Silent inside the hook, within its budget: not taken for hung ...
+        let (r, line) = rendered(&actuator(LifecycleHook::Activate, 5000), 2.5);
+        assert_eq!(r.health, "silent");
+        assert!(
+            line.contains("in on_activate (budget 5000 ms) silent 2.5 s"),
+            "{line}"
+        );
+        assert!(!line.contains("hung?"), "{line}");
+        // ... beyond it, it is.
+        let (_, line) = rendered(&actuator(LifecycleHook::Activate, 5000), 6.0);
+        assert!(line.contains("SILENT 6.0 s (hung?)"), "{line}");
+    }
+
+    #[test]
+    fn a_row_without_a_hook_shows_none() {
+        for hook in [0, 99] {
+            let st = ServiceStatus {
+                hook,
+                hook_budget_ms: 5000,
+                ..actuator(LifecycleHook::None, 0)
+            };
+            let (r, line) = rendered(&st, 2.5);
+            assert_eq!((r.hook, r.hook_budget_ms), (None, None));
+            assert!(!line.contains("budget"), "{line}");
+            assert!(line.contains("SILENT 2.5 s (hung?)"), "{line}");
+        }
+        let json =
+            serde_json::to_value(rendered(&actuator(LifecycleHook::None, 0), 0.1).0).expect("json");
+        assert!(
+            json["hook"].is_null() && json["hook_budget_ms"].is_null(),
+            "{json}"
+        );
     }
 }

@@ -612,6 +612,11 @@ impl Progress {
         if self.quiet {
             return;
         }
+        self.warn(msg);
+    }
+
+    /// [`Self::note`], also when quiet.
+    fn warn(&self, msg: &str) {
         match &self.bar {
             Some(bar) => bar.println(msg),
             None => eprintln!("{msg}"),
@@ -724,6 +729,15 @@ fn program_over(planner: &ServiceStatus, actuator: Option<&ServiceStatus>) -> bo
     );
     planner.program_done == 1
         || (ended && actuator.is_some_and(|a| a.lifecycle == LifecycleState::Fault as u32))
+}
+
+/// Takes the waiting statuses and warns once of each origin refused for a role (a
+/// status not from the process started for it: see [`crate::monitor`]).
+fn poll_statuses(monitor: &mut StatusMonitor, progress: &Progress) {
+    let _ = monitor.poll();
+    for r in monitor.take_refused() {
+        progress.warn(&format!("warning: {r}"));
+    }
 }
 
 fn is_ready(monitor: &StatusMonitor, role: ServiceRole) -> bool {
@@ -859,7 +873,10 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
         let launch = launch_for(role, &binaries, &cfg, &resolved, &run_dir);
         monitor.reset(role, monotonic_ns());
         match Service::spawn(launch) {
-            Ok(s) => pipe.services[slot(role)] = Some(s),
+            Ok(s) => {
+                monitor.expect(role, s.pid());
+                pipe.services[slot(role)] = Some(s);
+            }
             Err(e) => {
                 outcome = Some((
                     Stop::ServiceFailed,
@@ -871,7 +888,7 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
         }
         let deadline = Instant::now() + ready_timeout;
         loop {
-            let _ = monitor.poll();
+            poll_statuses(&mut monitor, &progress);
             if is_ready(&monitor, role) {
                 progress.note(&format!(
                     "{} ready (pid {})",
@@ -928,7 +945,7 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     // Supervise until a stop condition.
     let run_start = Instant::now();
     while outcome.is_none() {
-        let _ = monitor.poll();
+        poll_statuses(&mut monitor, &progress);
         state_tap.poll();
         if let Some(a) = monitor.get(ServiceRole::Actuator) {
             match LifecycleState::from_wire(a.lifecycle) {
@@ -1075,6 +1092,7 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
             monitor.reset(role, monotonic_ns());
             match Service::spawn(launch) {
                 Ok(s) => {
+                    monitor.expect(role, s.pid());
                     pipe.services[i] = Some(s);
                     pipe.restarting[i] = Some(Instant::now());
                 }
@@ -1113,6 +1131,9 @@ pub fn supervise_with(args: &RunArgs, hooks: &mut dyn Hooks) -> Result<(u8, Summ
     let all_clean = pipe.stop_all(&mut monitor, grace);
     let recorded = recorder.as_mut().is_none_or(|r| stop_recorder(r, grace));
     progress.finish();
+    for r in monitor.take_refused() {
+        eprintln!("warning: {r}");
+    }
     if let Some(msg) = &recorder_failed {
         eprintln!("error: {msg}");
     } else if !recorded {
@@ -1557,6 +1578,115 @@ mod tests {
             ..plain
         };
         assert!(hang(&unknown, ms(500), hung_after).is_some());
+    }
+
+    #[test]
+    fn a_forged_status_neither_refreshes_liveness_nor_extends_the_hang_budget() {
+        use microrobot_messages::{ServiceKind, open_publish_subscribe};
+        let me = std::process::id();
+        let instance = format!("status-origin-test-{me}");
+        let mut monitor = StatusMonitor::open(&instance, &format!("microrobot-test.{instance}"))
+            .expect("monitor");
+        let node =
+            microrobot_runtime::node::named_node(&format!("forger.{instance}")).expect("node");
+        let publisher =
+            open_publish_subscribe::<ServiceStatus>(&node, &instance, ServiceKind::Status)
+                .expect("status service")
+                .publisher_builder()
+                .create()
+                .expect("publisher");
+        let mut seq = 0;
+        let mut send = |pid: u32, hook: LifecycleHook, budget_ms: u32| {
+            seq += 1;
+            let st = ServiceStatus {
+                seq,
+                stamp_ns: monotonic_ns(),
+                role: ServiceRole::Actuator as u32,
+                lifecycle: LifecycleState::Active as u32,
+                pid,
+                ready: 1,
+                hook: hook as u32,
+                hook_budget_ms: budget_ms,
+                ..Default::default()
+            };
+            publisher.send_copy(st).expect("send");
+        };
+        let hung_after = Duration::from_millis(500);
+        let at = |m: &StatusMonitor| m.latest[slot(ServiceRole::Actuator)].map(|s| s.at);
+
+        // This process stands for the actuator the supervisor started: its status counts.
+        monitor.expect(ServiceRole::Actuator, me);
+        send(me, LifecycleHook::None, 0);
+        assert_eq!(monitor.poll().expect("poll"), 1);
+        let alive_at = at(&monitor).expect("a status");
+        assert!(monitor.take_refused().is_empty());
+
+        // Another pid's status announcing a 600 s hook: dropped, reported once.
+        let other = me.wrapping_add(1);
+        send(other, LifecycleHook::Reset, 600_000);
+        send(other, LifecycleHook::Reset, 600_000);
+        assert_eq!(monitor.poll().expect("poll"), 0);
+        assert_eq!(at(&monitor), Some(alive_at), "liveness not refreshed");
+        let last = monitor.get(ServiceRole::Actuator).expect("a status");
+        assert_eq!(last.pid, me);
+        assert!(
+            matches!(
+                hang(last, hung_after, hung_after),
+                Some(Hang::Silent { .. })
+            ),
+            "the hang allowance stays supervisor.hung_ms"
+        );
+        let refused = monitor.take_refused();
+        assert_eq!(
+            refused,
+            [crate::monitor::Refused {
+                role: ServiceRole::Actuator,
+                claimed_pid: other,
+                publisher_pid: Some(me as i32),
+                expected_pid: me,
+            }]
+        );
+        let line = refused[0].to_string();
+        assert!(
+            line.contains("actuator")
+                && line.contains(&format!("claim pid {other}"))
+                && line.contains(&format!("is pid {me}")),
+            "{line}"
+        );
+
+        // The process's own statuses still count.
+        send(me, LifecycleHook::None, 0);
+        assert_eq!(monitor.poll().expect("poll"), 1);
+        assert!(at(&monitor) > Some(alive_at));
+
+        // A status claiming the started process's pid from a publisher of another
+        // process (here: this one, while a child stands for the actuator) is dropped too.
+        let mut child = std::process::Command::new("sleep")
+            .arg("30")
+            .spawn()
+            .expect("spawn sleep");
+        let child_pid = child.id();
+        monitor.expect(ServiceRole::Actuator, child_pid);
+        let before = at(&monitor);
+        send(child_pid, LifecycleHook::Reset, 600_000);
+        let polled = monitor.poll().expect("poll");
+        let _ = child.kill();
+        let _ = child.wait();
+        assert_eq!(polled, 0);
+        assert_eq!(at(&monitor), before);
+        assert_eq!(
+            monitor.get(ServiceRole::Actuator).map(|s| s.hook),
+            Some(LifecycleHook::None as u32)
+        );
+        assert_eq!(
+            monitor.take_refused(),
+            [crate::monitor::Refused {
+                role: ServiceRole::Actuator,
+                claimed_pid: child_pid,
+                publisher_pid: Some(me as i32),
+                expected_pid: child_pid,
+            }]
+        );
     }
 
     #[test]

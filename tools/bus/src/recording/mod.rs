@@ -180,23 +180,23 @@ fn schema_of(v: &Value) -> Value {
 pub fn schema(topic: &str) -> Result<(&'static str, Value)> {
     let (name, sample) = match topic {
         "setpoint" => (
-            "microrobot::v1::JointSetpoint",
+            "microrobot::v2::JointSetpoint",
             setpoint_json(&JointSetpoint::default()),
         ),
         "torque" => (
-            "microrobot::v1::TorqueCommand",
+            "microrobot::v2::TorqueCommand",
             torque_json(&TorqueCommand::default()),
         ),
         "state" => (
-            "microrobot::v1::JointState",
+            "microrobot::v2::JointState",
             state_json(&JointState::default()),
         ),
         "command" => (
-            "microrobot::v1::MotionCommand",
+            "microrobot::v2::MotionCommand",
             command_json(&MotionCommand::default()),
         ),
         "status" => (
-            "microrobot::v1::ServiceStatus",
+            "microrobot::v2::ServiceStatus",
             status_json(&ServiceStatus::default()),
         ),
         other => bail!("unknown topic `{other}`"),
