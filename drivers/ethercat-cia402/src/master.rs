@@ -375,15 +375,20 @@ impl Transport {
     }
 
     /// A MainDevice on a raw socket (AF_PACKET) on `interface`, its frames carried by
-    /// [`crate::raw_socket::RawSocketLink`] (a late frame is dropped, not fatal).
-    pub fn raw_socket(interface: &str) -> Result<Transport, BringUpError> {
+    /// [`crate::raw_socket::RawSocketLink`] (a late frame is dropped, not fatal) on a
+    /// thread with the real-time settings `rt`.
+    pub fn raw_socket(
+        interface: &str,
+        rt: Option<crate::raw_socket::TransportRt>,
+    ) -> Result<Transport, BringUpError> {
         let (tx, rx, pdu_loop) = pdu_loop()?;
         let guard = Arc::new(FrameGuard::default());
-        let link = crate::raw_socket::RawSocketLink::spawn(interface, tx, rx, Arc::clone(&guard))
-            .map_err(|source| BringUpError::Socket {
-            interface: interface.to_string(),
-            source,
-        })?;
+        let link =
+            crate::raw_socket::RawSocketLink::spawn(interface, tx, rx, Arc::clone(&guard), rt)
+                .map_err(|source| BringUpError::Socket {
+                    interface: interface.to_string(),
+                    source,
+                })?;
         Ok(Transport::with_frame_guard(pdu_loop, link, guard))
     }
 }
