@@ -408,14 +408,17 @@ mod tests {
                 return;
             }
         };
-        // The thread sets itself up first thing; give it a moment (a generous guard).
+        // The thread names and sets itself up first thing; give it a moment (a generous
+        // guard).
         let deadline = std::time::Instant::now() + Duration::from_secs(5);
         let sched = loop {
-            let s = thread_scheduling("ethercat-tx-rx").expect("the transport thread");
-            if s.0 == libc::SCHED_FIFO || std::time::Instant::now() > deadline {
-                break s;
+            let s = thread_scheduling("ethercat-tx-rx");
+            let past = std::time::Instant::now() > deadline;
+            match s {
+                Some(s) if s.0 == libc::SCHED_FIFO || past => break s,
+                None if past => panic!("no thread named ethercat-tx-rx"),
+                _ => thread::sleep(Duration::from_millis(5)),
             }
-            thread::sleep(Duration::from_millis(5));
         };
         // Where SCHED_FIFO is permitted it is the cycle's priority plus one; elsewhere
         // the thread keeps the scheduling it was created with (the test's: SCHED_OTHER).
