@@ -36,6 +36,9 @@ fn drive_file(args: &Args) -> Result<DriveFile, String> {
 }
 
 fn main() -> ExitCode {
+    // Before the service installs tracing: ethercrab's line per late frame stays out of
+    // the log, the backend reports lost exchanges itself.
+    microrobot_runtime::init_tracing_quiet(microrobot_ethercat_cia402::report::QUIET);
     let parsed =
         Args::from_env(&["--drive-file", "--interface"]).and_then(|a| Ok((drive_file(&a)?, a)));
     let (file, args) = match parsed {
