@@ -23,7 +23,7 @@ use std::time::Duration;
 use ethercrab::{PduRx, PduTx};
 use microrobot_runtime::config::RealtimeConfig;
 
-use crate::master::FrameGuard;
+use crate::master::{FrameGuard, Link};
 
 /// The EtherCAT EtherType (ETG.1000.4 5.2).
 pub const ETHERCAT_ETHERTYPE: u16 = 0x88A4;
@@ -259,10 +259,11 @@ impl Wake for EventFdWaker {
 }
 
 /// The running transport; dropping it stops its thread (woken through its eventfd).
+/// As a [`Link`] it stops and gives back the PDU loop halves.
 pub struct RawSocketLink {
     stop: Arc<AtomicBool>,
     wake: Arc<EventFdWaker>,
-    thread: Option<JoinHandle<()>>,
+    thread: Option<JoinHandle<(PduTx<'static>, PduRx<'static>)>>,
 }
 
 impl RawSocketLink {
@@ -353,6 +354,7 @@ impl RawSocketLink {
                         }
                     }
                 }
+                (tx, rx)
             })?;
         Ok(RawSocketLink {
             stop,
@@ -362,13 +364,23 @@ impl RawSocketLink {
     }
 }
 
-impl Drop for RawSocketLink {
-    fn drop(&mut self) {
+impl RawSocketLink {
+    fn shut_down(&mut self) -> Option<(PduTx<'static>, PduRx<'static>)> {
         self.stop.store(true, Ordering::Release);
         self.wake.wake_by_ref();
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
+        self.thread.take().and_then(|t| t.join().ok())
+    }
+}
+
+impl Link for RawSocketLink {
+    fn stop(mut self: Box<Self>) -> Option<(PduTx<'static>, PduRx<'static>)> {
+        self.shut_down()
+    }
+}
+
+impl Drop for RawSocketLink {
+    fn drop(&mut self) {
+        let _ = self.shut_down();
     }
 }
 

@@ -107,7 +107,7 @@ fn late_frames_are_summarised_by_the_driver_not_logged_per_frame() {
     let connect = Box::new(move || {
         let (tx, rx, pdu_loop) = pdu_loop()?;
         let link = InProcessLink::spawn(emulator.clone(), tx, rx).expect("link thread");
-        Ok(Transport::new(pdu_loop, link))
+        Ok(Transport::new(pdu_loop, move || link.stop()))
     });
     let period = Duration::from_millis(200);
     let mut b = EthercatBackend::new(drive_file(), &["j1", "j2"], connect)
