@@ -18,10 +18,11 @@ OUT=${1:-target/ethercat-bench}; RUNS=${2:-3}; SECS=${3:-60}; RATE=${4:-1000}
 NS=microrobot-ecat-bench
 mkdir -p "$OUT"
 OUT=$(realpath "$OUT")
-# Two builds, as the quick start and the driver's README do (each its own feature set).
+# Two builds, as the quick start and the driver's README do (each its own feature set),
+# into $CARGO_TARGET_DIR when it is set.
 cargo build --release -q -p microrobot
 cargo build --release -q -p microrobot-ethercat-cia402 -p microrobot-ethercat-emulator --bins
-BIN=$(realpath target/release)
+BIN=$(realpath "${CARGO_TARGET_DIR:-target}/release")
 ROOT=$(pwd)
 CYCLE_US=$(( 1000000 / RATE ))
 sed -e 's/^interface = .*/interface = "ecm0"/' -e "s/^cycle_us = .*/cycle_us = $CYCLE_US/" \

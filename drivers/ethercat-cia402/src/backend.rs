@@ -24,6 +24,7 @@ use crate::cia402::{Axis, AxisFault, DriveState, Statusword, Target};
 use crate::drive_file::{DriveFile, Mode};
 use crate::master::{BringUpError, BringUpOptions, Bus, CycleError, LostCycles, Transport, codes};
 use crate::pdo::Outputs;
+use crate::report::{LossReport, REPORT_PERIOD};
 
 /// How long the enable sequence may take before it is a fault.
 pub const ENABLE_TIMEOUT: Duration = Duration::from_secs(2);
@@ -79,6 +80,16 @@ pub struct EthercatBackend {
     /// The last fault was the bus's, not a drive's: a reset brings the bus up again.
     bus_fault: bool,
     stats: ExchangeStats,
+    /// Lost exchanges, counted here and logged outside the cycle.
+    loss_report: LossReport,
+}
+
+/// The end of each lost-exchange log line.
+fn loss_context(deadline: Duration, max_lost_cycles: u32) -> String {
+    format!(
+        "frames not back within the {} µs deadline; up to max_lost_cycles = {max_lost_cycles} in a row are ridden out",
+        deadline.as_micros()
+    )
 }
 
 /// A fault with an owned text (not in the cycle).
@@ -125,6 +136,12 @@ impl EthercatBackend {
         }
         let n = file.axes.len();
         let period = Duration::from_micros(u64::from(file.bus.cycle_us));
+        let exchange_timeout = period / 2;
+        let loss_report = LossReport::spawn(
+            REPORT_PERIOD,
+            loss_context(exchange_timeout, file.bus.max_lost_cycles),
+        )
+        .map_err(|e| format!("cannot start the lost-exchange report thread: {e}"))?;
         Ok(EthercatBackend {
             lost: LostCycles::new(file.bus.max_lost_cycles),
             file,
@@ -137,16 +154,33 @@ impl EthercatBackend {
             measured: Measured::default(),
             saturated: false,
             period,
-            exchange_timeout: period / 2,
+            exchange_timeout,
             sync0_margin: None,
             bus_fault: false,
             stats: ExchangeStats::default(),
+            loss_report,
         })
     }
 
     /// Bounds each exchange by `timeout` instead of half the cycle.
     pub fn with_exchange_timeout(mut self, timeout: Duration) -> Self {
         self.exchange_timeout = timeout;
+        self.restart_loss_report(REPORT_PERIOD)
+    }
+
+    /// Writes the lost-exchange summary at most once per `period` instead of once per
+    /// [`REPORT_PERIOD`].
+    pub fn with_loss_report_period(self, period: Duration) -> Self {
+        self.restart_loss_report(period)
+    }
+
+    fn restart_loss_report(mut self, period: Duration) -> Self {
+        let context = loss_context(self.exchange_timeout, self.file.bus.max_lost_cycles);
+        // Only before the first cycle: nothing counted yet. A thread that cannot be
+        // started keeps the one running.
+        if let Ok(r) = LossReport::spawn(period, context) {
+            self.loss_report = r;
+        }
         self
     }
 
@@ -155,6 +189,11 @@ impl EthercatBackend {
     pub fn with_sync0_margin(mut self, margin: Duration) -> Self {
         self.sync0_margin = Some(margin);
         self
+    }
+
+    /// Exchanges lost since the backend was made (as reported in the log).
+    pub fn lost_exchanges(&self) -> u64 {
+        self.loss_report.total()
     }
 
     /// Timing of the exchanges so far.
@@ -223,6 +262,7 @@ impl EthercatBackend {
             Ok(()) => self.lost.ok(),
             Err(CycleError::Lost) => {
                 self.stats.lost += 1;
+                self.loss_report.lost();
                 if self.lost.lost() {
                     self.bus_fault = true;
                     return Err(Fault::drive(

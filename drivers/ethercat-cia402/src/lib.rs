@@ -19,6 +19,8 @@
 //! - [`master`]: the bus brought up from the drive file (identities checked first, SDO
 //!   configuration, watchdog, distributed clocks, OP) and the bounded cyclic exchange.
 //! - [`raw_socket`]: the AF_PACKET transport of the binary.
+//! - [`report`]: the driver's own rate-limited report of lost exchanges, and the
+//!   per-late-frame line of ethercrab's it leaves out of the log.
 //! - [`backend`]: the pipeline's actuator backend over it; the binary
 //!   `microrobot-ethercat-cia402` hands it to the driver SDK.
 
@@ -29,4 +31,5 @@ pub mod drive_file;
 pub mod master;
 pub mod pdo;
 pub mod raw_socket;
+pub mod report;
 pub mod scaling;

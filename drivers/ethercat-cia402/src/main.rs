@@ -16,6 +16,7 @@ use microrobot_driver::anyhow::{self, Context};
 use microrobot_ethercat_cia402::backend::EthercatBackend;
 use microrobot_ethercat_cia402::drive_file::DriveFile;
 use microrobot_ethercat_cia402::master::Transport;
+use microrobot_ethercat_cia402::raw_socket::TransportRt;
 
 const NAME: &str = "microrobot-ethercat-cia402";
 
@@ -35,6 +36,9 @@ fn drive_file(args: &Args) -> Result<DriveFile, String> {
 }
 
 fn main() -> ExitCode {
+    // Before the service installs tracing: ethercrab's line per late frame stays out of
+    // the log, the backend reports lost exchanges itself.
+    microrobot_runtime::init_tracing_quiet(microrobot_ethercat_cia402::report::QUIET);
     let parsed =
         Args::from_env(&["--drive-file", "--interface"]).and_then(|a| Ok((drive_file(&a)?, a)));
     let (file, args) = match parsed {
@@ -52,7 +56,9 @@ fn main() -> ExitCode {
         );
         let names: Vec<&str> = s.robot.joints().iter().map(|j| j.name.as_str()).collect();
         let iface = file.bus.interface.clone();
-        let connect = Box::new(move || Transport::raw_socket(&iface));
+        // The transport thread runs with the cycle's real-time settings (one step above).
+        let rt = TransportRt(s.cfg.service_realtime());
+        let connect = Box::new(move || Transport::raw_socket(&iface, Some(rt.clone())));
         EthercatBackend::new(file, &names, connect)
             .map_err(anyhow::Error::msg)
             .context("drive file")

@@ -16,10 +16,11 @@
 //! [`CycleError`]. It polls ethercrab's future on the calling thread with its own
 //! waker, so it needs no executor and takes no lock of its own.
 
-use std::any::Any;
 use std::future::Future;
+use std::mem::ManuallyDrop;
 use std::pin::pin;
-use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll, Wake, Waker};
 use std::thread::{self, Thread, ThreadId};
 use std::time::{Duration, Instant};
@@ -345,20 +346,81 @@ pub fn maindevice_config() -> MainDeviceConfig {
     }
 }
 
-/// A fresh PDU loop (its storage lives for the rest of the process): the transport's
-/// halves and the MainDevice's.
-pub fn pdu_loop() -> Result<(PduTx<'static>, PduRx<'static>, PduLoop<'static>), BringUpError> {
+/// A PDU loop's three handles: the transport's halves and the MainDevice's.
+pub type PduHalves = (PduTx<'static>, PduRx<'static>, PduLoop<'static>);
+
+/// PDU loops not in use, each on a storage that lives for the rest of the process.
+static IDLE_PDU_LOOPS: Mutex<Vec<PduHalves>> = Mutex::new(Vec::new());
+/// Storages made so far in this process.
+static PDU_STORAGES: AtomicUsize = AtomicUsize::new(0);
+
+/// A PDU loop for a bring-up: an idle one if there is one, else one on a new storage.
+///
+/// ethercrab's MainDevice needs its storage for `'static` and splits a storage only
+/// once, so a storage is never freed; instead a [`Transport`] hands its loop back when
+/// it is dropped (the MainDevice released with `release_all`, the halves back from the
+/// link's thread and reset) and the next bring-up takes it again. A process thus makes
+/// as many storages as it ever has transports at once — one in the driver, whatever
+/// the number of resets — instead of one per bring-up.
+pub fn pdu_loop() -> Result<PduHalves, BringUpError> {
+    if let Some(idle) = IDLE_PDU_LOOPS.lock().ok().and_then(|mut v| v.pop()) {
+        return Ok(idle);
+    }
     let storage: &'static PduStorage<MAX_FRAMES, MAX_PDU_DATA> =
         Box::leak(Box::new(PduStorage::new()));
+    PDU_STORAGES.fetch_add(1, Ordering::Relaxed);
     storage.try_split().map_err(|()| BringUpError::Storage)
 }
 
+/// How many PDU storages this process has made ([`pdu_loop`]).
+pub fn pdu_storages() -> usize {
+    PDU_STORAGES.load(Ordering::Relaxed)
+}
+
+/// What carries a MainDevice's frames (a socket thread, an in-process link). Stopped
+/// when its [`Transport`] is dropped, it gives back the halves it was given (None if it
+/// cannot: their storage is then not reused). A closure does, so a link from another
+/// crate is passed as `move || link.stop()`.
+pub trait Link: Send {
+    /// Stops carrying frames and returns the PDU loop halves.
+    fn stop(self: Box<Self>) -> Option<(PduTx<'static>, PduRx<'static>)>;
+}
+
+impl<F> Link for F
+where
+    F: FnOnce() -> Option<(PduTx<'static>, PduRx<'static>)> + Send,
+{
+    fn stop(self: Box<Self>) -> Option<(PduTx<'static>, PduRx<'static>)> {
+        (*self)()
+    }
+}
+
 /// A MainDevice and whatever keeps its frames moving (a socket thread, an in-process
-/// link), owned together.
+/// link), owned together. Dropping it stops the link and gives the PDU loop back for
+/// the next bring-up ([`pdu_loop`]).
 pub struct Transport {
-    maindevice: MainDevice<'static>,
-    _link: Box<dyn Any + Send>,
+    /// Taken out only in `drop`.
+    maindevice: ManuallyDrop<MainDevice<'static>>,
+    link: Option<Box<dyn Link>>,
     frame_guard: Option<Arc<FrameGuard>>,
+}
+
+impl Drop for Transport {
+    fn drop(&mut self) {
+        // SAFETY: taken once, here, and not used after.
+        let md = unsafe { ManuallyDrop::take(&mut self.maindevice) };
+        // SAFETY: a group configured on this MainDevice is never used with another: a
+        // `Bus` owns its group beside this transport and both go together. Frames still
+        // in flight are dropped: `release_all` resets every frame and makes the link's
+        // thread stop (and ignore what it receives meanwhile).
+        let pdu_loop = unsafe { md.release_all() };
+        let Some((tx, rx)) = self.link.take().and_then(|l| l.stop()) else {
+            return;
+        };
+        if let Ok(mut idle) = IDLE_PDU_LOOPS.lock() {
+            idle.push((tx.release(), rx.release(), pdu_loop));
+        }
+    }
 }
 
 /// Mutual exclusion between a transport handing a frame to ethercrab's PDU loop (claim
@@ -397,11 +459,15 @@ impl FrameGuard {
 }
 
 impl Transport {
-    /// A MainDevice on `pdu_loop` whose frames `link` carries (kept alive with it).
-    pub fn new(pdu_loop: PduLoop<'static>, link: impl Any + Send) -> Transport {
+    /// A MainDevice on `pdu_loop` whose frames `link` carries (stopped with it).
+    pub fn new(pdu_loop: PduLoop<'static>, link: impl Link + 'static) -> Transport {
         Transport {
-            maindevice: MainDevice::new(pdu_loop, timeouts(), maindevice_config()),
-            _link: Box::new(link),
+            maindevice: ManuallyDrop::new(MainDevice::new(
+                pdu_loop,
+                timeouts(),
+                maindevice_config(),
+            )),
+            link: Some(Box::new(link)),
             frame_guard: None,
         }
     }
@@ -409,25 +475,29 @@ impl Transport {
     /// The same, with the transport holding `guard` around every frame hand-over.
     pub fn with_frame_guard(
         pdu_loop: PduLoop<'static>,
-        link: impl Any + Send,
+        link: impl Link + 'static,
         guard: Arc<FrameGuard>,
     ) -> Transport {
-        Transport {
-            frame_guard: Some(guard),
-            ..Transport::new(pdu_loop, link)
-        }
+        let mut t = Transport::new(pdu_loop, link);
+        t.frame_guard = Some(guard);
+        t
     }
 
     /// A MainDevice on a raw socket (AF_PACKET) on `interface`, its frames carried by
-    /// [`crate::raw_socket::RawSocketLink`] (a late frame is dropped, not fatal).
-    pub fn raw_socket(interface: &str) -> Result<Transport, BringUpError> {
+    /// [`crate::raw_socket::RawSocketLink`] (a late frame is dropped, not fatal) on a
+    /// thread with the real-time settings `rt`.
+    pub fn raw_socket(
+        interface: &str,
+        rt: Option<crate::raw_socket::TransportRt>,
+    ) -> Result<Transport, BringUpError> {
         let (tx, rx, pdu_loop) = pdu_loop()?;
         let guard = Arc::new(FrameGuard::default());
-        let link = crate::raw_socket::RawSocketLink::spawn(interface, tx, rx, Arc::clone(&guard))
-            .map_err(|source| BringUpError::Socket {
-            interface: interface.to_string(),
-            source,
-        })?;
+        let link =
+            crate::raw_socket::RawSocketLink::spawn(interface, tx, rx, Arc::clone(&guard), rt)
+                .map_err(|source| BringUpError::Socket {
+                    interface: interface.to_string(),
+                    source,
+                })?;
         Ok(Transport::with_frame_guard(pdu_loop, link, guard))
     }
 }

@@ -4,6 +4,10 @@
 //! thread polls beside the socket) and hands every received frame to ethercrab. One
 //! thread, so a frame is marked sent before its answer can be taken in.
 //!
+//! The thread runs real-time when the service does ([`TransportRt`]): the cycle thread
+//! blocks on every frame it carries, so its wake-up latency is part of each exchange.
+//! It waits in poll(2) on the socket and the eventfd only; nothing on its path sleeps.
+//!
 //! ethercrab's own `tx_rx_task` ends at the first frame it cannot match (the late
 //! answer to an exchange the master gave up on), and with it the bus. Here such a frame
 //! is dropped and the loop goes on: a late frame costs one lost cycle, as it should.
@@ -17,13 +21,57 @@ use std::thread::{self, JoinHandle};
 use std::time::Duration;
 
 use ethercrab::{PduRx, PduTx};
+use microrobot_runtime::config::RealtimeConfig;
 
-use crate::master::FrameGuard;
+use crate::master::{FrameGuard, Link};
 
 /// The EtherCAT EtherType (ETG.1000.4 5.2).
 pub const ETHERCAT_ETHERTYPE: u16 = 0x88A4;
-/// How often the threads look at the stop flag.
+/// `PACKET_IGNORE_OUTGOING` (linux/if_packet.h), not in the libc crate.
+const PACKET_IGNORE_OUTGOING: libc::c_int = 23;
+/// How often the threads look at the stop flag (a stop also wakes them at once).
 const POLL: Duration = Duration::from_millis(10);
+
+/// The transport thread's real-time settings: the service's `[realtime]`
+/// ([`PipelineConfig::service_realtime`](microrobot_runtime::config::PipelineConfig::service_realtime)),
+/// applied with [`microrobot_runtime::rt::enter_helper_thread`].
+///
+/// Same CPU affinity as the cycle, SCHED_FIFO one step above it ([`TransportRt::ABOVE`]):
+/// the cycle thread blocks until the frame is back, so the transport never takes CPU time
+/// the cycle could use, while at the same priority a frame arriving when the cycle thread
+/// (between its wake and its park) or another stage of that priority on the CPU is
+/// running would wait until that task blocks — time added to the exchange. Its work per
+/// wake-up is bounded (a copy and a syscall per frame the master queued), so it starves
+/// nothing. Where SCHED_FIFO or the affinity is not permitted the thread runs as an
+/// ordinary thread, as it was created, and the process logs that once.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TransportRt(pub RealtimeConfig);
+
+impl TransportRt {
+    /// Priority steps above the cycle's.
+    pub const ABOVE: u32 = 1;
+
+    /// Applies the settings to the calling thread; says once per process when they
+    /// could not be applied (later transports fail the same way).
+    fn enter(&self) {
+        static SAID: AtomicBool = AtomicBool::new(false);
+        match microrobot_runtime::rt::enter_helper_thread(&self.0, Self::ABOVE) {
+            Ok(Some(p)) => {
+                if !SAID.swap(true, Ordering::Relaxed) {
+                    tracing::info!("EtherCAT transport thread: SCHED_FIFO priority {p}");
+                }
+            }
+            Ok(None) => {}
+            Err(e) => {
+                if !SAID.swap(true, Ordering::Relaxed) {
+                    tracing::warn!(
+                        "EtherCAT transport thread: real-time settings not applied, it runs as an ordinary thread: {e}"
+                    );
+                }
+            }
+        }
+    }
+}
 
 /// An AF_PACKET raw socket for EtherCAT frames on one interface: the driver's bus and
 /// the emulated drive chain's end of a veth pair.
@@ -70,6 +118,19 @@ impl RawSocket {
         if r < 0 {
             return Err(io::Error::last_os_error());
         }
+        // The socket's own frames are not delivered back to it (Linux 4.20+), so a send
+        // does not wake the receiver; on older kernels `try_recv` skips them.
+        let one: libc::c_int = 1;
+        // SAFETY: pointer and length describe `one`; a failure changes nothing.
+        let _ = unsafe {
+            libc::setsockopt(
+                fd.as_raw_fd(),
+                libc::SOL_PACKET,
+                PACKET_IGNORE_OUTGOING,
+                (&one as *const libc::c_int).cast(),
+                std::mem::size_of::<libc::c_int>() as u32,
+            )
+        };
         Ok(RawSocket {
             fd,
             ifindex: ifindex as i32,
@@ -197,27 +258,36 @@ impl Wake for EventFdWaker {
     }
 }
 
-/// The running transport; dropping it stops its thread (within one poll interval, `POLL`).
+/// The running transport; dropping it stops its thread (woken through its eventfd).
+/// As a [`Link`] it stops and gives back the PDU loop halves.
 pub struct RawSocketLink {
     stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    wake: Arc<EventFdWaker>,
+    thread: Option<JoinHandle<(PduTx<'static>, PduRx<'static>)>>,
 }
 
 impl RawSocketLink {
-    /// Opens `interface` and starts carrying the frames of `tx` and `rx`.
+    /// Opens `interface` and starts carrying the frames of `tx` and `rx` on a thread
+    /// with the real-time settings `rt` (None: as created).
     pub fn spawn(
         interface: &str,
         mut tx: PduTx<'static>,
         mut rx: PduRx<'static>,
         guard: Arc<FrameGuard>,
+        rt: Option<TransportRt>,
     ) -> io::Result<RawSocketLink> {
         let socket = RawSocket::bind(interface)?;
         let wake = Arc::new(EventFdWaker::new()?);
         let stop = Arc::new(AtomicBool::new(false));
         let st = Arc::clone(&stop);
+        let wake_thread = Arc::clone(&wake);
         let thread = thread::Builder::new()
             .name("ethercat-tx-rx".into())
             .spawn(move || {
+                let wake = wake_thread;
+                if let Some(rt) = rt {
+                    rt.enter();
+                }
                 let waker = Waker::from(Arc::clone(&wake));
                 let mut buf = [0u8; 2048];
                 let mut txbuf = [0u8; 2048];
@@ -276,27 +346,108 @@ impl RawSocketLink {
                                 // A frame nobody waits for any more (late) is dropped.
                                 let _ = guard.hold(|| rx.receive_frame(&buf[..n]));
                             }
-                            Ok(None) => break,
-                            Err(_) => {
-                                thread::sleep(POLL);
-                                break;
-                            }
+                            // A receive error (a pending socket error, which the failed
+                            // call consumes) ends the drain: back to poll(2), which
+                            // blocks until the next frame, without a sleep that would
+                            // hold up the frames behind it.
+                            Ok(None) | Err(_) => break,
                         }
                     }
                 }
+                (tx, rx)
             })?;
         Ok(RawSocketLink {
             stop,
+            wake,
             thread: Some(thread),
         })
     }
 }
 
+impl RawSocketLink {
+    fn shut_down(&mut self) -> Option<(PduTx<'static>, PduRx<'static>)> {
+        self.stop.store(true, Ordering::Release);
+        self.wake.wake_by_ref();
+        self.thread.take().and_then(|t| t.join().ok())
+    }
+}
+
+impl Link for RawSocketLink {
+    fn stop(mut self: Box<Self>) -> Option<(PduTx<'static>, PduRx<'static>)> {
+        self.shut_down()
+    }
+}
+
 impl Drop for RawSocketLink {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
+        let _ = self.shut_down();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// (policy, rt_priority) of this process's thread named `name`, from
+    /// /proc/self/task/*/stat (fields 41 and 40, counted from 1).
+    fn thread_scheduling(name: &str) -> Option<(i32, i32)> {
+        for task in std::fs::read_dir("/proc/self/task").ok()?.flatten() {
+            let comm = std::fs::read_to_string(task.path().join("comm")).unwrap_or_default();
+            if comm.trim_end() != name {
+                continue;
+            }
+            let stat = std::fs::read_to_string(task.path().join("stat")).ok()?;
+            // Fields after the parenthesised command, which may hold spaces.
+            let rest = &stat[stat.rfind(')')? + 2..];
+            let f: Vec<&str> = rest.split(' ').collect();
+            // `rest` starts at field 3 (state).
+            return Some((f.get(38)?.parse().ok()?, f.get(37)?.parse().ok()?));
         }
+        None
+    }
+
+    #[test]
+    fn the_transport_thread_runs_one_step_above_the_cycle_or_as_created() {
+        let (tx, rx, _pdu_loop) = crate::master::pdu_loop().expect("storage");
+        let mut cfg = microrobot_runtime::config::PipelineConfig::default().realtime;
+        cfg.cpu_affinity.clear();
+        cfg.sched_fifo_priority = 10;
+        let guard = Arc::new(FrameGuard::default());
+        let link = match RawSocketLink::spawn("lo", tx, rx, guard, Some(TransportRt(cfg))) {
+            Ok(l) => l,
+            Err(e) => {
+                println!("skipped: no raw socket on lo ({e}); needs CAP_NET_RAW");
+                return;
+            }
+        };
+        // The thread names and sets itself up first thing; give it a moment (a generous
+        // guard).
+        let deadline = std::time::Instant::now() + Duration::from_secs(5);
+        let sched = loop {
+            let s = thread_scheduling("ethercat-tx-rx");
+            let past = std::time::Instant::now() > deadline;
+            match s {
+                Some(s) if s.0 == libc::SCHED_FIFO || past => break s,
+                None if past => panic!("no thread named ethercat-tx-rx"),
+                _ => thread::sleep(Duration::from_millis(5)),
+            }
+        };
+        // Where SCHED_FIFO is permitted it is the cycle's priority plus one; elsewhere
+        // the thread keeps the scheduling it was created with (the test's: SCHED_OTHER).
+        // SAFETY: plain syscall on the calling thread.
+        let fifo_permitted = unsafe {
+            let p = libc::sched_param { sched_priority: 1 };
+            let ok = libc::sched_setscheduler(0, libc::SCHED_FIFO, &p) == 0;
+            let p0 = libc::sched_param { sched_priority: 0 };
+            libc::sched_setscheduler(0, libc::SCHED_OTHER, &p0);
+            ok
+        };
+        if fifo_permitted {
+            assert_eq!(sched, (libc::SCHED_FIFO, 10 + TransportRt::ABOVE as i32));
+        } else {
+            assert_eq!(sched, (libc::SCHED_OTHER, 0));
+        }
+        drop(link);
+        assert!(thread_scheduling("ethercat-tx-rx").is_none(), "stopped");
     }
 }

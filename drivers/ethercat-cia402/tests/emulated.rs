@@ -48,7 +48,7 @@ fn backend(emulator: &Emulator, file: DriveFile) -> EthercatBackend {
     let connect = Box::new(move || {
         let (tx, rx, pdu_loop) = pdu_loop()?;
         let link = InProcessLink::spawn(emulator.clone(), tx, rx).expect("link thread");
-        Ok(Transport::new(pdu_loop, link))
+        Ok(Transport::new(pdu_loop, move || link.stop()))
     });
     // A loaded test machine: a generous exchange deadline (simulated time advances per
     // exchange, so it changes nothing else).

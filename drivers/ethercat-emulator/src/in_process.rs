@@ -28,11 +28,12 @@ impl Wake for ThreadWaker {
 ///
 /// Each frame the MainDevice sends is answered at once, or after an injected delay
 /// while later frames are answered meanwhile (the MainDevice may have given up on the
-/// late one, as with a late frame on a real wire). Dropping the link stops its thread.
+/// late one, as with a late frame on a real wire). Dropping the link stops its thread;
+/// [`InProcessLink::stop`] also gives the PDU loop halves back for reuse.
 #[derive(Debug)]
 pub struct InProcessLink {
     stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    thread: Option<JoinHandle<(PduTx<'static>, PduRx<'static>)>>,
 }
 
 impl InProcessLink {
@@ -73,6 +74,7 @@ impl InProcessLink {
                     }
                     thread::park_timeout(late.wait(Duration::from_millis(2)));
                 }
+                (tx, rx)
             })?;
         Ok(InProcessLink {
             stop,
@@ -80,22 +82,22 @@ impl InProcessLink {
         })
     }
 
-    /// Stops the link and waits for its thread.
-    pub fn stop(mut self) {
-        self.shutdown();
+    /// Stops the link, waits for its thread and returns the halves it was given (None
+    /// if the thread panicked), e.g. for the next MainDevice on the same storage.
+    pub fn stop(mut self) -> Option<(PduTx<'static>, PduRx<'static>)> {
+        self.shutdown()
     }
 
-    fn shutdown(&mut self) {
+    fn shutdown(&mut self) -> Option<(PduTx<'static>, PduRx<'static>)> {
         self.stop.store(true, Ordering::Release);
-        if let Some(t) = self.thread.take() {
-            t.thread().unpark();
-            let _ = t.join();
-        }
+        let t = self.thread.take()?;
+        t.thread().unpark();
+        t.join().ok()
     }
 }
 
 impl Drop for InProcessLink {
     fn drop(&mut self) {
-        self.shutdown();
+        let _ = self.shutdown();
     }
 }

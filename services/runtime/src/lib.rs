@@ -212,12 +212,127 @@ pub fn service_main_with(
 /// stderr). Colours only on a terminal: a service's stderr is its log file, which must
 /// stay plain text for `grep`, `microrobot logs` and the run's verdict.
 pub fn init_tracing() {
+    init_tracing_quiet(QuietLines(&[]));
+}
+
+/// [`init_tracing`] leaving `quiet` out of the log. Only the first installation counts:
+/// a process that quiets lines calls this before anything else installs tracing (the
+/// later [`init_tracing`] of [`service_main`] then changes nothing).
+pub fn init_tracing_quiet(quiet: QuietLines) {
     use std::io::IsTerminal as _;
     use tracing_subscriber::EnvFilter;
+    use tracing_subscriber::layer::SubscriberExt as _;
+    use tracing_subscriber::util::SubscriberInitExt as _;
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
+    let fmt = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
+        .with_ansi(std::io::stderr().is_terminal());
+    let _ = tracing_subscriber::registry()
+        .with(fmt)
+        .with(filter)
+        .with(quiet)
         .try_init();
+}
+
+/// Log lines a process leaves out of its log: the events (and `log` records) whose
+/// target is exactly `.0` at exactly level `.1`. Exact, unlike a `RUST_LOG` directive,
+/// which also matches the modules below the target: those keep every line. For a
+/// library's line per event in the cycle that the process counts and reports itself.
+/// As a layer it decides at each call site (no cost for the others); it is a per-layer
+/// filter too.
+#[derive(Debug, Clone, Copy)]
+pub struct QuietLines(pub &'static [(&'static str, tracing::Level)]);
+
+impl QuietLines {
+    /// Whether `meta` is one of the quieted lines.
+    pub fn hides(&self, meta: &tracing::Metadata<'_>) -> bool {
+        self.0
+            .iter()
+            .any(|(target, level)| meta.target() == *target && meta.level() == level)
+    }
+
+    fn interest(&self, meta: &tracing::Metadata<'_>) -> tracing::subscriber::Interest {
+        if self.hides(meta) {
+            tracing::subscriber::Interest::never()
+        } else {
+            tracing::subscriber::Interest::always()
+        }
+    }
+}
+
+impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for QuietLines {
+    fn register_callsite(
+        &self,
+        meta: &'static tracing::Metadata<'static>,
+    ) -> tracing::subscriber::Interest {
+        self.interest(meta)
+    }
+
+    fn enabled(
+        &self,
+        meta: &tracing::Metadata<'_>,
+        _: tracing_subscriber::layer::Context<'_, S>,
+    ) -> bool {
+        !self.hides(meta)
+    }
+}
+
+impl<S> tracing_subscriber::layer::Filter<S> for QuietLines {
+    fn enabled(
+        &self,
+        meta: &tracing::Metadata<'_>,
+        _: &tracing_subscriber::layer::Context<'_, S>,
+    ) -> bool {
+        !self.hides(meta)
+    }
+
+    fn callsite_enabled(
+        &self,
+        meta: &'static tracing::Metadata<'static>,
+    ) -> tracing::subscriber::Interest {
+        self.interest(meta)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::{Arc, Mutex};
+    use tracing_subscriber::layer::SubscriberExt as _;
+
+    /// (target, level) of every event that reaches it.
+    struct Seen(Arc<Mutex<Vec<(String, tracing::Level)>>>);
+
+    impl<S: tracing::Subscriber> tracing_subscriber::Layer<S> for Seen {
+        fn on_event(&self, e: &tracing::Event<'_>, _: tracing_subscriber::layer::Context<'_, S>) {
+            let m = e.metadata();
+            if let Ok(mut v) = self.0.lock() {
+                v.push((m.target().to_string(), *m.level()));
+            }
+        }
+    }
+
+    #[test]
+    fn quiet_lines_hide_exactly_their_target_and_level() {
+        static QUIET: &[(&str, tracing::Level)] = &[("lib::frames", tracing::Level::ERROR)];
+        let seen = Arc::default();
+        let subscriber = tracing_subscriber::registry()
+            .with(Seen(Arc::clone(&seen)))
+            .with(QuietLines(QUIET));
+        tracing::subscriber::with_default(subscriber, || {
+            tracing::error!(target: "lib::frames", "hidden");
+            tracing::warn!(target: "lib::frames", "another level");
+            tracing::error!(target: "lib::frames::rx", "a module below");
+            tracing::error!(target: "lib", "the module above");
+            tracing::error!(target: "lib::framesx", "a longer name");
+        });
+        let seen = seen.lock().expect("seen").clone();
+        let targets: Vec<&str> = seen.iter().map(|(t, _)| t.as_str()).collect();
+        assert_eq!(
+            targets,
+            ["lib::frames", "lib::frames::rx", "lib", "lib::framesx"],
+            "{seen:?}"
+        );
+        assert_eq!(seen[0].1, tracing::Level::WARN);
+    }
 }

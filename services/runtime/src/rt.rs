@@ -142,6 +142,38 @@ pub fn enter_cycle(cfg: &RealtimeConfig, g: &mut RtGuard) {
     }
 }
 
+/// The settings for a thread the cycle blocks on (a bus transport that carries the
+/// cycle's frames): the cycle's CPU affinity and SCHED_FIFO at the cycle's priority plus
+/// `above` (at most 99), as `cfg` says, each applied independently. Returns the FIFO
+/// priority taken (None when `cfg` asks for none), or the text of what was not applied;
+/// it warns about nothing itself, so a caller that starts such a thread more than once
+/// can say so once.
+pub fn enter_helper_thread(cfg: &RealtimeConfig, above: u32) -> Result<Option<i32>, String> {
+    let mut failed = Vec::new();
+    if !cfg.cpu_affinity.is_empty()
+        && let Err(e) = set_affinity(&cfg.cpu_affinity)
+    {
+        failed.push(format!("cpu_affinity: {e}"));
+    }
+    let mut fifo = None;
+    if cfg.sched_fifo_priority > 0 {
+        let priority = cfg.sched_fifo_priority.saturating_add(above).min(99) as i32;
+        if set_scheduler(libc::SCHED_FIFO, priority) {
+            fifo = Some(priority);
+        } else {
+            failed.push(format!(
+                "sched_setscheduler(SCHED_FIFO, {priority}): {}",
+                errno()
+            ));
+        }
+    }
+    if failed.is_empty() {
+        Ok(fifo)
+    } else {
+        Err(failed.join("; "))
+    }
+}
+
 /// Housekeeping a cycle does after its real work (its status: percentiles, CPU time,
 /// memory, the publish) runs one step below the cycle's SCHED_FIFO priority: a stage
 /// that this process's message just woke on the same CPU (equal priority, so it would
@@ -234,6 +266,42 @@ mod tests {
         // SAFETY: as above.
         unsafe { libc::sched_getparam(0, &mut p) };
         (policy, p.sched_priority)
+    }
+
+    #[test]
+    fn a_helper_thread_runs_above_the_cycle_or_as_it_was() {
+        std::thread::spawn(|| {
+            let before = scheduling();
+            let cfg = RealtimeConfig {
+                cpu_affinity: Vec::new(),
+                pm_qos: false,
+                pm_qos_latency_us: 0,
+                timer_slack_ns: 0,
+                sched_fifo_priority: 0,
+                mlockall: false,
+                overrun: crate::config::OverrunPolicy::Skip,
+            };
+            assert_eq!(enter_helper_thread(&cfg, 1), Ok(None));
+            assert_eq!(scheduling(), before, "nothing asked, nothing changed");
+            let cfg = RealtimeConfig {
+                sched_fifo_priority: 99,
+                ..cfg
+            };
+            match enter_helper_thread(&cfg, 1) {
+                // Capped at the highest SCHED_FIFO priority.
+                Ok(p) => {
+                    assert_eq!(p, Some(99));
+                    assert_eq!(scheduling(), (libc::SCHED_FIFO, 99));
+                }
+                // Not permitted here: the thread keeps its scheduling.
+                Err(e) => {
+                    assert!(e.contains("SCHED_FIFO, 99"), "{e}");
+                    assert_eq!(scheduling(), before);
+                }
+            }
+        })
+        .join()
+        .expect("the helper thread");
     }
 
     #[test]
