@@ -12,6 +12,8 @@ use microrobot_ethercat_cia402::drive_file::DriveFile;
 use microrobot_ethercat_cia402::master::{Transport, pdu_loop};
 use microrobot_ethercat_cia402::report::{ETHERCRAB_LATE_FRAME_TARGET, QUIET};
 use microrobot_ethercat_emulator::{ChainConfig, Emulator, Fault as Inject, InProcessLink};
+
+mod common;
 use tracing_subscriber::Layer;
 use tracing_subscriber::layer::SubscriberExt;
 use tracing_subscriber::util::SubscriberInitExt;
@@ -50,16 +52,9 @@ impl<S: tracing::Subscriber> Layer<S> for Capture {
     }
 }
 
+/// The example drive file's first two axes (the drives' watchdog at 1 s).
 fn drive_file() -> DriveFile {
-    let text = include_str!("../example.drive.toml")
-        .replace("drive_watchdog_ms = 10", "drive_watchdog_ms = 1000");
-    let mut parts = text.split("\n[[axis]]\n");
-    let mut out = parts.next().expect("bus table").to_string();
-    for p in parts.take(2) {
-        out.push_str("\n[[axis]]\n");
-        out.push_str(p);
-    }
-    DriveFile::from_toml_str(&out, "test.drive.toml").expect("drive file")
+    common::drive_file(2, 1.27)
 }
 
 /// Cycles for `d` (the late answers arrive meanwhile).

@@ -10,16 +10,11 @@ use microrobot_ethercat_cia402::drive_file::DriveFile;
 use microrobot_ethercat_cia402::master::{Transport, codes, pdu_loop, pdu_storages};
 use microrobot_ethercat_emulator::{ChainConfig, Emulator, Fault as Inject, InProcessLink};
 
+mod common;
+
+/// The example drive file's first two axes (the drives' watchdog at 1 s).
 fn drive_file() -> DriveFile {
-    let text = include_str!("../example.drive.toml")
-        .replace("drive_watchdog_ms = 10", "drive_watchdog_ms = 1000");
-    let mut parts = text.split("\n[[axis]]\n");
-    let mut out = parts.next().expect("bus table").to_string();
-    for p in parts.take(2) {
-        out.push_str("\n[[axis]]\n");
-        out.push_str(p);
-    }
-    DriveFile::from_toml_str(&out, "test.drive.toml").expect("drive file")
+    common::drive_file(2, 1.27)
 }
 
 fn backend(e: &Emulator) -> EthercatBackend {
