@@ -80,8 +80,11 @@ pub struct EthercatBackend {
     /// The last fault was the bus's, not a drive's: a reset brings the bus up again.
     bus_fault: bool,
     stats: ExchangeStats,
-    /// Lost exchanges, counted here and logged outside the cycle.
-    loss_report: LossReport,
+    /// Lost exchanges, counted here and logged outside the cycle; its thread starts
+    /// with the first bring-up, once the settings it names are final.
+    loss_report: Option<LossReport>,
+    /// At most one lost-exchange line per this.
+    loss_report_period: Duration,
 }
 
 /// The end of each lost-exchange log line.
@@ -137,11 +140,6 @@ impl EthercatBackend {
         let n = file.axes.len();
         let period = Duration::from_micros(u64::from(file.bus.cycle_us));
         let exchange_timeout = period / 2;
-        let loss_report = LossReport::spawn(
-            REPORT_PERIOD,
-            loss_context(exchange_timeout, file.bus.max_lost_cycles),
-        )
-        .map_err(|e| format!("cannot start the lost-exchange report thread: {e}"))?;
         Ok(EthercatBackend {
             lost: LostCycles::new(file.bus.max_lost_cycles),
             file,
@@ -158,29 +156,21 @@ impl EthercatBackend {
             sync0_margin: None,
             bus_fault: false,
             stats: ExchangeStats::default(),
-            loss_report,
+            loss_report: None,
+            loss_report_period: REPORT_PERIOD,
         })
     }
 
     /// Bounds each exchange by `timeout` instead of half the cycle.
     pub fn with_exchange_timeout(mut self, timeout: Duration) -> Self {
         self.exchange_timeout = timeout;
-        self.restart_loss_report(REPORT_PERIOD)
+        self
     }
 
     /// Writes the lost-exchange summary at most once per `period` instead of once per
     /// [`REPORT_PERIOD`].
-    pub fn with_loss_report_period(self, period: Duration) -> Self {
-        self.restart_loss_report(period)
-    }
-
-    fn restart_loss_report(mut self, period: Duration) -> Self {
-        let context = loss_context(self.exchange_timeout, self.file.bus.max_lost_cycles);
-        // Only before the first cycle: nothing counted yet. A thread that cannot be
-        // started keeps the one running.
-        if let Ok(r) = LossReport::spawn(period, context) {
-            self.loss_report = r;
-        }
+    pub fn with_loss_report_period(mut self, period: Duration) -> Self {
+        self.loss_report_period = period;
         self
     }
 
@@ -193,7 +183,7 @@ impl EthercatBackend {
 
     /// Exchanges lost since the backend was made (as reported in the log).
     pub fn lost_exchanges(&self) -> u64 {
-        self.loss_report.total()
+        self.loss_report.as_ref().map_or(0, LossReport::total)
     }
 
     /// Timing of the exchanges so far.
@@ -212,6 +202,17 @@ impl EthercatBackend {
     }
 
     fn bring_up(&mut self) -> Result<(), Fault> {
+        if self.loss_report.is_none() {
+            let context = loss_context(self.exchange_timeout, self.file.bus.max_lost_cycles);
+            let report = LossReport::spawn(self.loss_report_period, context).map_err(|e| {
+                fault(
+                    None,
+                    codes::BRING_UP,
+                    format!("cannot start the lost-exchange report thread: {e}"),
+                )
+            })?;
+            self.loss_report = Some(report);
+        }
         let up = (self.connect)()
             .and_then(|t| {
                 let options = BringUpOptions {
@@ -262,7 +263,9 @@ impl EthercatBackend {
             Ok(()) => self.lost.ok(),
             Err(CycleError::Lost) => {
                 self.stats.lost += 1;
-                self.loss_report.lost();
+                if let Some(r) = &self.loss_report {
+                    r.lost();
+                }
                 if self.lost.lost() {
                     self.bus_fault = true;
                     return Err(Fault::drive(
