@@ -16,8 +16,8 @@ use microrobot_runtime::config::{OwnedSection, PipelineConfig};
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::Refusal;
 use microrobot_runtime::{
-    BadConfig, Cycle, Inbox, Outbox, PeriodicClock, Reactor, Ready, Shutdown, Source, Stage,
-    Subscription, Ticker, TimerFd,
+    ArrivalTicker, BadConfig, Cycle, Inbox, Outbox, PeriodicClock, Reactor, Ready, Shutdown,
+    Source, Stage, Subscription, Ticker, TimerFd,
 };
 
 use crate::{
@@ -146,7 +146,7 @@ where
         };
         let mut stage = ActuatorStage {
             core,
-            ticker,
+            clock: StepClock::Timer(ticker),
             e2e: LatencyHistogram::new(),
             torque_to_taken: LatencyHistogram::new(),
             step_to_state: LatencyHistogram::new(),
@@ -248,11 +248,38 @@ pub(crate) struct Sources {
     timer: Source,
 }
 
+/// What clocks the plant's steps.
+enum StepClock {
+    /// The actuator's own timer, a step per tick: lockstep (the safe state's steps),
+    /// the planner ticking on states (this timer is the pipeline's master clock), and
+    /// free-running until the first torque command phases the steps.
+    Timer(Ticker),
+    /// Free-running on the planner's clock: each step runs as its torque arrives, the
+    /// timer only for steps whose torque did not come (see [`ArrivalTicker`]).
+    Arrival(ArrivalTicker),
+}
+
+impl StepClock {
+    fn period_ns(&self) -> u64 {
+        match self {
+            Self::Timer(t) => t.period_ns(),
+            Self::Arrival(t) => t.period_ns(),
+        }
+    }
+}
+
+/// How late, at most, the arrival clock's timer notices a missing torque command
+/// (see [`ArrivalTicker`]): 1 ms, and never more than a quarter of `stale_ms`.
+const FALLBACK_LAG_MAX_NS: u64 = 1_000_000;
+
+/// Steps run back to back in one wake-up, at most (the rest of a backlog is dropped).
+const CATCH_UP_STEPS_MAX: u32 = 100;
+
 /// The framework around a backend: [`ActuatorCore`] (lifecycle, watchdogs, safe-state
 /// latch, one-publisher rule) and the bookkeeping of the cycle.
 pub(crate) struct ActuatorStage<B: ActuatorBackend> {
     core: ActuatorCore<B>,
-    ticker: Ticker,
+    clock: StepClock,
     /// Setpoint source stamp → torque received.
     e2e: LatencyHistogram,
     /// Its last hop, for the same torques: torque stamp → torque received (taken from
@@ -311,8 +338,8 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
 
     /// Free-running: puts the plant steps' latest time half a period after the
     /// planner's ticks, so torque k is applied in the step that ends before setpoint
-    /// k+1 (the same one-period loop delay as lockstep), whether the torque steps it on
-    /// arrival or the timer does.
+    /// k+1 (the same one-period loop delay as lockstep), and from then on clocks the
+    /// steps by the torques' arrival ([`StepClock::Arrival`]).
     fn phase(&mut self, ports: &Ports, cfg: &PipelineConfig, source_stamp_ns: u64, now: u64) {
         self.phased = true;
         let p = cfg.period_ns();
@@ -322,23 +349,51 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
         }
         if ports.timer.arm_absolute(first, p).is_ok() {
             let _ = ports.timer.read_expirations();
-            self.ticker = Ticker::new(first, p, cfg.realtime.overrun);
+            let max_lag = FALLBACK_LAG_MAX_NS.min(cfg.watchdog.stale_ns() / 4);
+            let lead = ArrivalTicker::lead_for(p, max_lag);
+            self.clock = StepClock::Arrival(ArrivalTicker::new(first, p, lead));
         }
     }
 
     /// Free-running on the planner's clock: the plant step of this period runs as its
     /// torque arrives, rather than on a timer wake-up of its own (one wake-up per period
-    /// instead of two). The timer stays armed at the step's latest time, half a period
-    /// after the setpoint, and wakes the actuator only when no torque came by then (the
-    /// step then holds or ramps as the watchdog says). Either way torque k is applied in
-    /// the step that ends before setpoint k+1, one step per period.
+    /// instead of two), so torque k is applied in the step that ends before setpoint
+    /// k+1, one step per period. A step whose torque did not come by its time runs at
+    /// the next wake-up, the next torque's or the timer's (see [`ArrivalTicker`]), and
+    /// holds or ramps as the watchdog says.
     fn step_on_arrival(&mut self, ports: &Ports, now: u64) {
+        let StepClock::Arrival(clock) = &mut self.clock else {
+            return;
+        };
         let timer = &ports.timer;
-        let early = self
-            .ticker
-            .take_early(now, |first, p| timer.arm_absolute(first, p).is_ok());
-        if early.is_some() {
+        if clock
+            .take_early(now, |first, p| timer.arm_absolute(first, p).is_ok())
+            .is_some()
+        {
             self.step(ports, now);
+        }
+    }
+
+    /// Arrival clock: the steps whose time has come without their torque, each checking
+    /// the watchdog first; those older than `stale_ms` are not replayed (a stall: no
+    /// torque that old is applied, and the plant does not run a burst of catch-up
+    /// steps).
+    fn run_due(&mut self, ports: &Ports, cfg: &PipelineConfig) {
+        let stale_ns = cfg.watchdog.stale_ns();
+        let mut n = 0;
+        loop {
+            let now = monotonic_ns();
+            let StepClock::Arrival(clock) = &mut self.clock else {
+                return;
+            };
+            if clock.next_due(now, stale_ns).is_none() {
+                return;
+            }
+            self.core.check_watchdog(now);
+            if n < CATCH_UP_STEPS_MAX {
+                self.step_and_publish(ports, now);
+                n += 1;
+            }
         }
     }
 
@@ -386,11 +441,20 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
     /// it are dropped, not replayed (the core restarted its clocks from the hook's end,
     /// see `ActuatorCore::reset`). Returns whether a hook took longer than a period.
     fn after_hooks(&mut self, ports: &Ports) -> bool {
-        if self.core.take_hook_ns() <= self.ticker.period_ns() {
+        if self.core.take_hook_ns() <= self.clock.period_ns() {
             return false;
         }
-        self.ticker.on_expirations(ports.timer.read_expirations());
-        while self.ticker.next_tick().is_some() {}
+        let expirations = ports.timer.read_expirations();
+        match &mut self.clock {
+            StepClock::Timer(t) => {
+                t.on_expirations(expirations);
+                while t.next_tick().is_some() {}
+            }
+            StepClock::Arrival(t) => {
+                t.on_expirations(expirations);
+                t.skip_due(monotonic_ns());
+            }
+        }
         true
     }
 
@@ -428,14 +492,24 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
     }
 
     fn on_timer(&mut self, ports: &Ports, cfg: &PipelineConfig) {
-        self.ticker.on_expirations(ports.timer.read_expirations());
+        let expirations = ports.timer.read_expirations();
         // Hands the last state (history 1) to subscribers that joined since the last
         // send: in lockstep nothing is sent until the first torque, and the planner
         // starts from that state.
         ports.states.update_connections();
+        match &mut self.clock {
+            StepClock::Timer(t) => t.on_expirations(expirations),
+            StepClock::Arrival(t) => {
+                t.on_expirations(expirations);
+                self.run_due(ports, cfg);
+                return;
+            }
+        }
         let stale_ns = cfg.watchdog.stale_ns();
         let mut n = 0;
-        while let Some(tick) = self.ticker.next_tick() {
+        while let StepClock::Timer(t) = &mut self.clock
+            && let Some(tick) = t.next_tick()
+        {
             let now = monotonic_ns();
             // Free-running, a period that ended more than `stale_ms` ago is not replayed
             // (a stall): no torque that old is applied, and the plant does not run a
@@ -444,7 +518,7 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
                 continue;
             }
             self.core.check_watchdog(now);
-            if self.core.steps_on_timer() && n < 100 {
+            if self.core.steps_on_timer() && n < CATCH_UP_STEPS_MAX {
                 self.step_and_publish(ports, now);
                 n += 1;
             }
@@ -477,6 +551,8 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
         // (A freeze inside this wake-up is caught by the next command or plant step.)
         let stalls = self.core.counters.stalls;
         self.core.on_wake(monotonic_ns());
+        // Steps whose time passed without their torque run before any newer torque.
+        self.run_due(ports, cfg);
         if ready.contains(on.torque) {
             self.take_torques(ports, cycle, &mut was_latched);
         }

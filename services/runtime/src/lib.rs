@@ -5,6 +5,7 @@
 //! services are `fn(&PipelineConfig, &Shutdown) -> anyhow::Result<()>` run by
 //! [`service_main`].
 
+pub mod arrival;
 pub mod config;
 pub mod node;
 pub mod ports;
@@ -28,13 +29,14 @@ pub use microrobot_messages::ServiceRole;
 // The bus carries the model's joint vectors: one capacity for both (the messages crate
 // stays free of the model, the model free of the bus).
 const _: () = assert!(microrobot_messages::MAX_JOINTS == microrobot_model::MAX_JOINTS);
+pub use arrival::ArrivalTicker;
 pub use node::{InstanceInUse, open_node, waitset};
 pub use ports::{Inbox, Outbox, Received, Subscription};
 pub use reactor::{Reactor, Ready, Source};
 pub use shutdown::Shutdown;
 pub use stage::{Cycle, SetUp, Stage, serve};
 pub use status::StatusPort;
-pub use timer::{PeriodicClock, Ticker, TimerFd};
+pub use timer::{PeriodicClock, Tick, Ticker, TimerFd};
 pub use watchdog::{Freshness, Watchdog};
 
 /// Process exit codes shared by the services and every `microrobot` command; one meaning

@@ -153,34 +153,6 @@ impl Ticker {
             ideal_ns: self.start_ns + index * self.period_ns,
         })
     }
-
-    /// Runs the next grid tick ahead of its time, when it is due within one period
-    /// (`now_ns` in `(ideal − period, ideal)`) and no tick is overdue: work a message
-    /// can start early (the actuator's plant step on its torque) runs then, instead of
-    /// on a second wake-up of its own. `rearm(first_ns, period_ns)` moves the timer to
-    /// the grid point after it, so the timer does not wake for the tick already run;
-    /// when it fails, nothing is taken and the timer runs the tick as usual.
-    pub fn take_early(
-        &mut self,
-        now_ns: u64,
-        rearm: impl FnOnce(u64, u64) -> bool,
-    ) -> Option<Tick> {
-        if self.next_index < self.expired {
-            return None;
-        }
-        let index = self.next_index;
-        let ideal_ns = self.start_ns + index * self.period_ns;
-        if now_ns >= ideal_ns || ideal_ns - now_ns > self.period_ns {
-            return None;
-        }
-        if !rearm(ideal_ns + self.period_ns, self.period_ns) {
-            return None;
-        }
-        // The timer's expirations count from the next grid point on.
-        self.next_index = index + 1;
-        self.expired = index + 1;
-        Some(Tick { index, ideal_ns })
-    }
 }
 
 /// A periodic timer plus its [`Ticker`]: the planner's clock, and the bare timer loop of
@@ -353,51 +325,6 @@ mod tests {
         assert_eq!(idx, vec![0, 1, 2]);
         assert_eq!(t.deadline_misses, 2);
         assert_eq!(t.skipped_ticks, 0);
-    }
-
-    #[test]
-    fn a_tick_taken_early_is_not_run_again_and_the_grid_stays() {
-        let mut t = Ticker::new(1000, 100, OverrunPolicy::CatchUp);
-        let mut armed = Vec::new();
-        // More than a period ahead, at or after its time, or refused by the timer: not taken.
-        let mut arm = |f, p| {
-            armed.push((f, p));
-            true
-        };
-        assert_eq!(t.take_early(899, &mut arm), None);
-        assert_eq!(t.take_early(1000, |_, _| true), None);
-        assert_eq!(t.take_early(950, |_, _| false), None);
-        assert!(armed.is_empty());
-        // Within its period: taken, the timer re-armed at the next grid point.
-        let early = t.take_early(950, |f, p| {
-            armed.push((f, p));
-            true
-        });
-        assert_eq!(
-            early,
-            Some(Tick {
-                index: 0,
-                ideal_ns: 1000
-            })
-        );
-        assert_eq!(armed, vec![(1100, 100)]);
-        // The same period's second message finds nothing to run early.
-        assert_eq!(t.take_early(990, |_, _| true), None);
-        // The re-armed timer's first expiration is grid point 1, on time.
-        t.on_expirations(1);
-        assert_eq!(
-            t.next_tick(),
-            Some(Tick {
-                index: 1,
-                ideal_ns: 1100
-            })
-        );
-        assert_eq!(t.next_tick(), None);
-        // An expiration not yet handed out: the timer's path runs it, nothing early.
-        t.on_expirations(1);
-        assert_eq!(t.take_early(1190, |_, _| true), None);
-        assert_eq!(t.next_tick().map(|k| k.index), Some(2));
-        assert_eq!(t.deadline_misses, 0);
     }
 
     #[test]
