@@ -16,8 +16,8 @@ use microrobot_runtime::config::{OwnedSection, PipelineConfig};
 use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::Refusal;
 use microrobot_runtime::{
-    ArrivalTicker, BadConfig, Cycle, Inbox, Outbox, PeriodicClock, Reactor, Ready, Shutdown,
-    Source, Stage, Subscription, Ticker, TimerFd,
+    ArrivalTicker, BadConfig, Cycle, Inbox, Outbox, Reactor, Ready, Shutdown, Source, Stage,
+    Subscription, Ticker, TimerFd,
 };
 
 use crate::{
@@ -136,8 +136,12 @@ where
         if let Some(r) = &start.resume {
             core.resume_after_restart(&r.tau, !cfg.watchdog.auto_resume);
         }
-        let PeriodicClock { timer, ticker } =
-            PeriodicClock::start(cfg.period_ns(), cfg.realtime.overrun)?;
+        // One timerfd, not a `PeriodicClock`'s pair: once the torques phase the steps it
+        // is moved, and then never onto the CPU's next expiry (see `ArrivalTicker`).
+        let timer = TimerFd::new()?;
+        let first = monotonic_ns() + cfg.period_ns();
+        timer.arm_absolute(first, cfg.period_ns())?;
+        let ticker = Ticker::new(first, cfg.period_ns(), cfg.realtime.overrun);
         let ports = Ports {
             torques,
             states,

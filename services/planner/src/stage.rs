@@ -12,7 +12,7 @@ use microrobot_runtime::stats::LatencyHistogram;
 use microrobot_runtime::validate::Refusal;
 use microrobot_runtime::{
     BadConfig, Cycle, Inbox, Outbox, PeriodicClock, Reactor, Ready, Shutdown, Source, Stage,
-    Subscription, Ticker, TimerFd, serve,
+    Subscription, TickTimer, Ticker, serve,
 };
 
 use crate::program::ProgramRunner;
@@ -124,7 +124,7 @@ struct Ports {
     /// Polled: the newest valid sample is used at the next tick.
     master: Inbox<MasterPose>,
     /// The clock (or, ticking on states, the status and watchdog pace).
-    timer: TimerFd,
+    timer: TickTimer,
 }
 
 #[derive(Clone, Copy)]

@@ -5,7 +5,8 @@
 //! Why the timer lags: moving a timer that is the CPU's next to expire makes the kernel
 //! reprogram the clock-event device, which in a virtual machine is an exit to the
 //! hypervisor (about 6 µs per move on the reference VM, against under 1 µs for a timer
-//! that is not the next; see `docs/benchmarks.md`). A step due half a period after the
+//! that is not the next; `cargo run --release -p microrobot-runtime --example
+//! timer_move`). A step due half a period after the
 //! planner's tick is always the next to expire when its message arrives just after that
 //! tick. So the timer is kept `lead` grid points past the pending step (at least one),
 //! where the planner's next tick comes first, and it is moved only once every `lead`

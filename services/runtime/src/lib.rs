@@ -36,7 +36,7 @@ pub use reactor::{Reactor, Ready, Source};
 pub use shutdown::Shutdown;
 pub use stage::{Cycle, SetUp, Stage, serve};
 pub use status::StatusPort;
-pub use timer::{PeriodicClock, Tick, Ticker, TimerFd};
+pub use timer::{PeriodicClock, Tick, TickTimer, Ticker, TimerFd};
 pub use watchdog::{Freshness, Watchdog};
 
 /// Process exit codes shared by the services and every `microrobot` command; one meaning
