@@ -6,7 +6,9 @@
 //! config) and the pipeline's own bus hops: a *source* ticks on a timerfd at `rate_hz`
 //! and publishes a [`JointSetpoint`], a *relay* woken by it publishes a
 //! [`TorqueCommand`], and a *sink* woken by that records `receive time − setpoint
-//! publish time`. Each waits on the same [`Reactor`] and notifies through the same
+//! publish time` and answers with a [`JointState`], the feedback the source and the relay
+//! take from their state queues at each wake-up (polled, as the planner and the dynamics
+//! do: it wakes nobody). Each waits on the same [`Reactor`] and notifies through the same
 //! iceoryx2 event services as the pipeline, and does no other work. The links run from a
 //! binary as slim as the services' (the runtime and the messages, nothing of the CLI),
 //! so the chain locks as little memory and touches as little code per wake-up as the
@@ -20,8 +22,8 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::service::ipc;
 use microrobot_messages::{
-    JointSetpoint, LatencySummary, ServiceKind, TorqueCommand, monotonic_ns, open_event,
-    open_publish_subscribe,
+    JointSetpoint, JointState, LatencySummary, ServiceKind, TorqueCommand, monotonic_ns,
+    open_event, open_publish_subscribe,
 };
 use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::node::named_node;
@@ -121,16 +123,29 @@ pub struct LinkReport {
 /// What the relay and the sink do with a wake-up's samples.
 #[allow(clippy::large_enum_variant)] // one value per process, built once
 enum Hop {
-    /// Answer each setpoint with a torque command.
+    /// Answer each setpoint with a torque command, after taking the states.
     Relay {
         sub: Subscriber<ipc::Service, JointSetpoint, ()>,
+        states: Subscriber<ipc::Service, JointState, ()>,
         publisher: Publisher<ipc::Service, TorqueCommand, ()>,
         notifier: Notifier<ipc::Service>,
     },
-    /// Record each torque command's end-to-end latency.
+    /// Record each torque command's end-to-end latency and answer it with a state.
     Sink {
         sub: Subscriber<ipc::Service, TorqueCommand, ()>,
+        publisher: Publisher<ipc::Service, JointState, ()>,
+        notifier: Notifier<ipc::Service>,
     },
+}
+
+/// Empties the state queue down to the newest state, as the planner and the dynamics
+/// do at each wake-up.
+fn take_states(states: &Subscriber<ipc::Service, JointState, ()>) -> Option<JointState> {
+    let mut newest = None;
+    while let Ok(Some(s)) = states.receive() {
+        newest = Some(*s);
+    }
+    newest
 }
 
 /// A port of the chain, or an error naming it.
@@ -170,6 +185,8 @@ pub fn run(
     let sp_event = open_event(&node, instance, ServiceKind::Setpoint)?;
     let tq = open_publish_subscribe::<TorqueCommand>(&node, instance, ServiceKind::Torque)?;
     let tq_event = open_event(&node, instance, ServiceKind::Torque)?;
+    let st = open_publish_subscribe::<JointState>(&node, instance, ServiceKind::State)?;
+    let st_event = open_event(&node, instance, ServiceKind::State)?;
     let period_ns = cfg.period_ns();
     let end_ticks = (duration_s * cfg.rate_hz).round().max(1.0) as u64;
     let mut hist = LatencyHistogram::new();
@@ -181,6 +198,7 @@ pub fn run(
         Link::Source => {
             let publisher = port(sp.publisher_builder().create(), "publisher")?;
             let notifier = port(sp_event.notifier_builder().create(), "notifier")?;
+            let states = port(st.subscriber_builder().create(), "state subscriber")?;
             // Give the others' subscribers a moment to connect to the new publisher.
             std::thread::sleep(std::time::Duration::from_millis(100));
             say_ready();
@@ -203,6 +221,7 @@ pub fn run(
                     && let Some(t) = ticker.next_tick()
                 {
                     hist.record(now.saturating_sub(t.ideal_ns));
+                    take_states(&states);
                     seq += 1;
                     let mut msg = JointSetpoint::default();
                     msg.header.seq = seq;
@@ -223,6 +242,7 @@ pub fn run(
             let (listener, hop) = if link == Link::Relay {
                 let hop = Hop::Relay {
                     sub: port(sp.subscriber_builder().create(), "subscriber")?,
+                    states: port(st.subscriber_builder().create(), "state subscriber")?,
                     publisher: port(tq.publisher_builder().create(), "publisher")?,
                     notifier: port(tq_event.notifier_builder().create(), "notifier")?,
                 };
@@ -230,6 +250,8 @@ pub fn run(
             } else {
                 let hop = Hop::Sink {
                     sub: port(tq.subscriber_builder().create(), "subscriber")?,
+                    publisher: port(st.publisher_builder().create(), "state publisher")?,
+                    notifier: port(st_event.notifier_builder().create(), "state notifier")?,
                 };
                 (port(tq_event.listener_builder().create(), "listener")?, hop)
             };
@@ -253,9 +275,11 @@ pub fn run(
                 match &hop {
                     Hop::Relay {
                         sub,
+                        states,
                         publisher,
                         notifier,
                     } => {
+                        take_states(states);
                         while let Ok(Some(s)) = sub.receive() {
                             let h = s.header;
                             drop(s);
@@ -271,7 +295,11 @@ pub fn run(
                             }
                         }
                     }
-                    Hop::Sink { sub } => {
+                    Hop::Sink {
+                        sub,
+                        publisher,
+                        notifier,
+                    } => {
                         while let Ok(Some(s)) = sub.receive() {
                             let now = monotonic_ns();
                             let h = s.header;
@@ -279,6 +307,14 @@ pub fn run(
                             hist.record(now.saturating_sub(h.source_stamp_ns));
                             lost += h.seq.saturating_sub(last_seq + 1);
                             last_seq = h.seq;
+                            let mut out = JointState::default();
+                            out.header.seq = h.seq;
+                            out.header.tick = h.tick;
+                            out.header.stamp_ns = monotonic_ns();
+                            out.header.source_stamp_ns = h.source_stamp_ns;
+                            if publisher.send_copy(out).is_ok() {
+                                let _ = notifier.notify();
+                            }
                         }
                     }
                 }
