@@ -128,4 +128,14 @@ pub trait ActuatorBackend {
     fn write(&mut self, now_ns: u64, period_s: f64, tau: &JointVector) -> Result<(), Fault>;
     /// The measured state at `now_ns`.
     fn read(&mut self, now_ns: u64) -> Result<Measured, Fault>;
+    /// Free-running: whether a cycle may run late when its torque command is late or
+    /// missing. The framework then notices a missing command up to about a millisecond
+    /// late and runs the cycle at that moment, which spares it moving its timer onto the
+    /// CPU's next expiry every period (a hypervisor exit in a VM; see
+    /// `microrobot_runtime::ArrivalTicker`). A bus with a fixed cycle, whose drives
+    /// expect a frame every period, keeps the default: each cycle runs by its time,
+    /// torque or not. A simulated arm loses nothing by a late step.
+    fn cycle_may_run_late(&self) -> bool {
+        false
+    }
 }

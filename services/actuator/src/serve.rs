@@ -272,8 +272,9 @@ impl StepClock {
     }
 }
 
-/// How late, at most, the arrival clock's timer notices a missing torque command
-/// (see [`ArrivalTicker`]): 1 ms, and never more than a quarter of `stale_ms`.
+/// How late, at most, the arrival clock's timer notices a missing torque command, for a
+/// backend whose cycle may run late (see [`ArrivalTicker`]): 1 ms, and never more than a
+/// quarter of `stale_ms`.
 const FALLBACK_LAG_MAX_NS: u64 = 1_000_000;
 
 /// Steps run back to back in one wake-up, at most (the rest of a backlog is dropped).
@@ -353,8 +354,12 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
         }
         if ports.timer.arm_absolute(first, p).is_ok() {
             let _ = ports.timer.read_expirations();
-            let max_lag = FALLBACK_LAG_MAX_NS.min(cfg.watchdog.stale_ns() / 4);
-            let lead = ArrivalTicker::lead_for(p, max_lag);
+            let lead = if self.core.backend().cycle_may_run_late() {
+                let max_lag = FALLBACK_LAG_MAX_NS.min(cfg.watchdog.stale_ns() / 4);
+                ArrivalTicker::lead_for(p, max_lag)
+            } else {
+                0
+            };
             self.clock = StepClock::Arrival(ArrivalTicker::new(first, p, lead));
         }
     }

@@ -138,6 +138,11 @@ impl ActuatorBackend for SimArm {
         self.dof
     }
 
+    /// A late step integrates the same period: nothing on a bus misses it.
+    fn cycle_may_run_late(&self) -> bool {
+        true
+    }
+
     fn on_activate(&mut self) -> Result<(), Fault> {
         self.enabled = true;
         Ok(())

@@ -22,7 +22,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::service::ipc;
 use microrobot_messages::{
-    JointSetpoint, JointState, LatencySummary, ServiceKind, TorqueCommand, monotonic_ns,
+    Header, JointSetpoint, JointState, LatencySummary, ServiceKind, TorqueCommand, monotonic_ns,
     open_event, open_publish_subscribe,
 };
 use microrobot_runtime::config::PipelineConfig;
@@ -136,6 +136,17 @@ enum Hop {
         publisher: Publisher<ipc::Service, JointState, ()>,
         notifier: Notifier<ipc::Service>,
     },
+}
+
+/// The header of the message answering one headed `h`: its sequence number, tick and
+/// source stamp, stamped now.
+fn answer_to(h: &Header) -> Header {
+    Header {
+        seq: h.seq,
+        tick: h.tick,
+        stamp_ns: monotonic_ns(),
+        source_stamp_ns: h.source_stamp_ns,
+    }
 }
 
 /// Empties the state queue down to the newest state, as the planner and the dynamics
@@ -285,11 +296,10 @@ pub fn run(
                             drop(s);
                             lost += h.seq.saturating_sub(last_seq + 1);
                             last_seq = h.seq;
-                            let mut out = TorqueCommand::default();
-                            out.header.seq = h.seq;
-                            out.header.tick = h.tick;
-                            out.header.stamp_ns = monotonic_ns();
-                            out.header.source_stamp_ns = h.source_stamp_ns;
+                            let out = TorqueCommand {
+                                header: answer_to(&h),
+                                ..Default::default()
+                            };
                             if publisher.send_copy(out).is_ok() {
                                 let _ = notifier.notify();
                             }
@@ -307,11 +317,10 @@ pub fn run(
                             hist.record(now.saturating_sub(h.source_stamp_ns));
                             lost += h.seq.saturating_sub(last_seq + 1);
                             last_seq = h.seq;
-                            let mut out = JointState::default();
-                            out.header.seq = h.seq;
-                            out.header.tick = h.tick;
-                            out.header.stamp_ns = monotonic_ns();
-                            out.header.source_stamp_ns = h.source_stamp_ns;
+                            let out = JointState {
+                                header: answer_to(&h),
+                                ..Default::default()
+                            };
                             if publisher.send_copy(out).is_ok() {
                                 let _ = notifier.notify();
                             }

@@ -12,7 +12,9 @@
 //! where the planner's next tick comes first, and it is moved only once every `lead`
 //! steps. A missing message is then noticed up to `lead` periods late; the steps that
 //! fell due meanwhile run back to back at once ([`ArrivalTicker::next_due`]), and when
-//! messages stay away the timer's ticks run each step on time.
+//! messages stay away the timer's ticks run each step on time. With `lead` 0 the timer
+//! stays at the pending step's own time and is moved at every step: for a step that must
+//! run by its time whatever it costs (a bus cycle).
 
 use crate::timer::Tick;
 
@@ -34,15 +36,15 @@ pub struct ArrivalTicker {
 
 impl ArrivalTicker {
     /// A grid `start_ns + n·period_ns`, with its timer armed to fire first at
-    /// `start_ns` (grid point 0) and every period after, moved `lead` (at least 1)
-    /// grid points past the pending step by [`ArrivalTicker::take_early`].
+    /// `start_ns` (grid point 0) and every period after, moved `lead` grid points past
+    /// the pending step by [`ArrivalTicker::take_early`] (0: onto it).
     pub fn new(start_ns: u64, period_ns: u64, lead: u64) -> Self {
         Self {
             start_ns,
             period_ns: period_ns.max(1),
             next_index: 0,
             timer_index: 0,
-            lead: lead.max(1),
+            lead,
             dropped_ticks: 0,
         }
     }
@@ -107,9 +109,9 @@ impl ArrivalTicker {
     /// On a message's arrival at `now_ns`: the next step, run now ahead of its time,
     /// when it is due within one period (`now_ns` in `(ideal − period, ideal)`) and no
     /// step is due (run [`ArrivalTicker::next_due`] first). When the timer would then
-    /// fire at the next pending step's own time, `rearm(first_ns, period_ns)` moves it
-    /// `lead` grid points past it; when that fails, nothing is taken and the timer
-    /// runs the step late.
+    /// fire at or before the next pending step's own time, `rearm(first_ns, period_ns)`
+    /// moves it `lead` grid points past that step; when that fails, nothing is taken
+    /// and the timer runs the step.
     pub fn take_early(
         &mut self,
         now_ns: u64,
@@ -160,6 +162,25 @@ mod tests {
         }
         // Moved at steps 0, 3 and 6, each time 3 grid points past the pending step.
         assert_eq!(armed, vec![(0, 1400, 100), (3, 1700, 100), (6, 2000, 100)]);
+    }
+
+    #[test]
+    fn with_no_lead_the_timer_is_moved_onto_each_pending_step_and_fires_on_time() {
+        let mut t = grid(0);
+        let mut armed = Vec::new();
+        for k in 0..3u64 {
+            let now = 1000 + k * 100 - 40;
+            let tick = t.take_early(now, |f, _| {
+                armed.push(f);
+                true
+            });
+            assert_eq!(tick.map(|t| t.index), Some(k));
+        }
+        assert_eq!(armed, vec![1100, 1200, 1300]);
+        // Step 3's message is missing: the timer fires at its time and it runs then.
+        t.on_expirations(1);
+        assert_eq!(t.next_due(1300, u64::MAX).map(|t| t.index), Some(3));
+        assert_eq!(t.next_due(1300, u64::MAX), None);
     }
 
     #[test]
