@@ -35,7 +35,7 @@ pub const DISABLE_TIMEOUT: Duration = Duration::from_secs(1);
 /// tests); called by every bring-up.
 pub type Connect = Box<dyn FnMut() -> Result<Transport, BringUpError>>;
 
-/// Timing of the cyclic exchanges since configure.
+/// Timing of the cyclic exchanges since the backend was made.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ExchangeStats {
     /// Exchanges done.
@@ -179,11 +179,6 @@ impl EthercatBackend {
     pub fn with_sync0_margin(mut self, margin: Duration) -> Self {
         self.sync0_margin = Some(margin);
         self
-    }
-
-    /// Exchanges lost since the backend was made (as reported in the log).
-    pub fn lost_exchanges(&self) -> u64 {
-        self.loss_report.as_ref().map_or(0, LossReport::total)
     }
 
     /// Timing of the exchanges so far.

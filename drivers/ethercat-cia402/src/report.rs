@@ -88,11 +88,6 @@ impl LossReport {
     pub fn lost(&self) {
         self.lost.fetch_add(1, Ordering::Relaxed);
     }
-
-    /// Exchanges lost since start.
-    pub fn total(&self) -> u64 {
-        self.lost.load(Ordering::Relaxed)
-    }
 }
 
 impl Drop for LossReport {

@@ -111,7 +111,7 @@ fn late_frames_are_summarised_by_the_driver_not_logged_per_frame() {
         .with_loss_report_period(period);
     b.on_configure().expect("configure");
     b.on_activate().expect("activate");
-    let lost_before = b.lost_exchanges();
+    let lost_before = b.exchange_stats().lost;
 
     // Three late frames (max_lost_cycles = 3: ridden out), answered 60 ms late.
     e.inject(Inject::DelayFrames {
@@ -120,7 +120,7 @@ fn late_frames_are_summarised_by_the_driver_not_logged_per_frame() {
     })
     .expect("inject");
     cycle_for(&mut b, period * 2);
-    assert!(b.lost_exchanges() >= lost_before + 3);
+    assert!(b.exchange_stats().lost >= lost_before + 3);
     // Then two more, after the first summary.
     let deadline = Instant::now() + Duration::from_secs(10);
     while summaries(&shown).is_empty() && Instant::now() < deadline {
@@ -132,7 +132,7 @@ fn late_frames_are_summarised_by_the_driver_not_logged_per_frame() {
     })
     .expect("inject");
     cycle_for(&mut b, period * 2);
-    let lost = b.lost_exchanges();
+    let lost = b.exchange_stats().lost;
     assert!(lost >= lost_before + 5, "{lost}");
     b.on_shutdown();
     let periodic = summaries(&shown).len();

@@ -369,7 +369,8 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
     /// instead of two), so torque k is applied in the step that ends before setpoint
     /// k+1, one step per period. A step whose torque did not come by its time runs at
     /// the next wake-up, the next torque's or the timer's (see [`ArrivalTicker`]), and
-    /// holds or ramps as the watchdog says.
+    /// holds or ramps as the watchdog says. Nothing on the actuator's own timer clock
+    /// (lockstep, the planner ticking on states): that timer steps the plant.
     fn step_on_arrival(&mut self, ports: &Ports, now: u64) {
         let StepClock::Arrival(clock) = &mut self.clock else {
             return;
@@ -435,10 +436,10 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
                 if !cfg.lockstep && !self.phased {
                     self.phase(ports, cfg, msg.header.source_stamp_ns, now);
                 }
-                if !self.core.steps_on_timer() {
-                    self.step(ports, now);
-                } else if !cfg.planner_ticks_on_states() {
+                if self.core.steps_on_timer() {
                     self.step_on_arrival(ports, now);
+                } else {
+                    self.step(ports, now);
                 }
             }
             // An activation that blocked: its periods are not replayed.
@@ -508,9 +509,9 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
         ports.states.update_connections();
         match &mut self.clock {
             StepClock::Timer(t) => t.on_expirations(expirations),
+            // Its due steps ran at the start of this wake-up (`run_due`).
             StepClock::Arrival(t) => {
                 t.on_expirations(expirations);
-                self.run_due(ports, cfg);
                 return;
             }
         }

@@ -101,9 +101,12 @@ impl ArrivalTicker {
     /// Drops every step whose grid time has come by `now_ns` (the periods a blocking
     /// call spent are not replayed).
     pub fn skip_due(&mut self, now_ns: u64) {
-        while self.next_due(now_ns, u64::MAX).is_some() {
-            self.dropped_ticks += 1;
+        if now_ns < self.ideal_ns(self.next_index) {
+            return;
         }
+        let first_ahead = (now_ns - self.start_ns) / self.period_ns + 1;
+        self.dropped_ticks += first_ahead - self.next_index;
+        self.next_index = first_ahead;
     }
 
     /// On a message's arrival at `now_ns`: the next step, run now ahead of its time,

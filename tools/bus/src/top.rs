@@ -2,11 +2,11 @@
 //! stream: cycles/s, each one's own timing p50/p99 (planner: wake-up lateness; dynamics:
 //! setpoint → torque; actuator: end-to-end latency), misses, lost, refused, stale, faults,
 //! lifecycle, silence (a live process whose status stopped is shown as hung), a blocking
-//! lifecycle hook the actuator announced with its budget, the planner's e-stop latency; then what the arm does: the planner's activity (program,
-//! move, hold, e-stop, safe state, teleop) and program state, each joint's measured
-//! position and commanded torque, and the tool pose; then the latency budget by hop (as
-//! in the run's summary, counted since each service started). It exits when the
-//! pipeline ends.
+//! lifecycle hook the actuator announced with its budget, the planner's e-stop latency;
+//! then what the arm does: the planner's activity (program, move, hold, e-stop, safe
+//! state, teleop) and program state, each joint's measured position and commanded
+//! torque, and the tool pose; then the latency budget by hop (as in the run's summary,
+//! counted since each service started). It exits when the pipeline ends.
 
 use std::io::IsTerminal as _;
 use std::sync::Arc;
