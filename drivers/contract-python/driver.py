@@ -167,6 +167,7 @@ def open_event(node, instance, stream):
             .event()
             .max_listeners(16)
             .max_notifiers(16)
+            .event_id_max_value(0)
             .max_nodes(32)
             .open_or_create())
 

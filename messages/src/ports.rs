@@ -69,6 +69,11 @@ pub mod qos {
     pub const MAX_NODES: usize = 32;
     /// Notifiers and listeners per event service.
     pub const MAX_EVENT_PORTS: usize = 16;
+    /// Largest event id of an event service: every notification is a plain `notify()`
+    /// (id 0). A listener's wake-up clears one counter per possible id, an atomic swap on
+    /// shared memory each, so iceoryx2's default of 255 cost 256 swaps (32 cache lines)
+    /// per drained listener and wake-up.
+    pub const EVENT_ID_MAX: usize = 0;
 }
 
 /// Failure to open a service of the contract.
@@ -187,6 +192,7 @@ pub fn open_event(
         .event()
         .max_listeners(qos::MAX_EVENT_PORTS)
         .max_notifiers(qos::MAX_EVENT_PORTS)
+        .event_id_max_value(qos::EVENT_ID_MAX)
         .max_nodes(qos::MAX_NODES)
         .open_or_create()
         .map_err(|e| BusError::Open {

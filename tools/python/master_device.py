@@ -64,6 +64,7 @@ QOS = {"subscriber_max_buffer_size": 256, "subscriber_max_borrowed_samples": 2,
        "history_size": 1, "max_publishers": 8, "max_subscribers": 16, "max_nodes": 32}
 EVENT_PORTS = 16
 EVENT_MAX_NODES = 32
+EVENT_ID_MAX = 0  # every notification is a plain notify() (id 0)
 
 
 def service_name(instance: str) -> str:
@@ -168,7 +169,8 @@ def open_ports(instance: str):
         raise SystemExit(f"master_device: cannot open service '{name}': {reason}") from None
     try:
         event = (node.service_builder(svc_name).event().max_listeners(EVENT_PORTS)
-                 .max_notifiers(EVENT_PORTS).max_nodes(EVENT_MAX_NODES).open_or_create())
+                 .max_notifiers(EVENT_PORTS).event_id_max_value(EVENT_ID_MAX)
+                 .max_nodes(EVENT_MAX_NODES).open_or_create())
     except iox2.EventOpenOrCreateError as e:
         raise SystemExit(f"master_device: cannot open event service '{name}': {e}") from None
     return node, svc.publisher_builder().create(), event.notifier_builder().create(), name

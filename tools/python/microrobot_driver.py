@@ -192,6 +192,7 @@ QOS = {"subscriber_max_buffer_size": 256, "subscriber_max_borrowed_samples": 2,
 SUBSCRIBER_BUFFER = 256
 EVENT_PORTS = 16
 EVENT_MAX_NODES = 32
+EVENT_ID_MAX = 0  # every notification is a plain notify() (id 0)
 STREAMS = {"setpoint": JointSetpoint, "torque": TorqueCommand, "state": JointState,
            "command": MotionCommand, "status": ServiceStatus, "master": MasterPose}
 
@@ -226,7 +227,7 @@ def open_event(node, instance, stream):
     """Opens (or creates) the event service paired with `stream`."""
     return (node.service_builder(iox2.ServiceName.new(service_name(instance, stream))).event()
             .max_listeners(EVENT_PORTS).max_notifiers(EVENT_PORTS)
-            .max_nodes(EVENT_MAX_NODES).open_or_create())
+            .event_id_max_value(EVENT_ID_MAX).max_nodes(EVENT_MAX_NODES).open_or_create())
 
 
 def open_subscriber(node, instance, stream, history=0):
