@@ -118,7 +118,16 @@ pub struct LinkReport {
     pub deadline_misses: u64,
     /// Relay, sink: sequence gaps seen.
     pub lost_messages: u64,
+    /// Source: setpoints published. Relay, sink: messages taken.
+    pub messages: u64,
+    /// Relay, sink: stopped after [`SILENCE_GUARD_NS`] without a message, before the
+    /// last one came (the chain broke; its figures mean nothing).
+    pub stopped_on_silence: bool,
 }
+
+/// A relay or sink that hears nothing for this long stops waiting (5 s: a generous guard,
+/// so a broken chain ends instead of hanging).
+pub const SILENCE_GUARD_NS: u64 = 5_000_000_000;
 
 /// What the relay and the sink do with a wake-up's samples.
 #[allow(clippy::large_enum_variant)] // one value per process, built once
@@ -175,7 +184,8 @@ fn say_ready() {
 }
 
 /// Runs `link` of the chain `instance` at `cfg.rate_hz` for `duration_s` (the source's
-/// ticks; the others until the last one arrives or 5 s pass without a message) with
+/// ticks; the others until the last one arrives or [`SILENCE_GUARD_NS`] pass without a
+/// message) with
 /// the config's real-time settings, and returns its report. Prints `ready` once its
 /// ports exist. Dies with its parent.
 pub fn run(
@@ -202,6 +212,8 @@ pub fn run(
     let mut wakes = 0u64;
     let mut lost = 0u64;
     let mut misses = 0u64;
+    let mut messages = 0u64;
+    let mut stopped_on_silence = false;
     let (cpu0, wall0, cpu1, wall1);
     match link {
         Link::Source => {
@@ -238,6 +250,7 @@ pub fn run(
                     msg.header.stamp_ns = monotonic_ns();
                     msg.header.source_stamp_ns = msg.header.stamp_ns;
                     if publisher.send_copy(msg).is_ok() {
+                        messages += 1;
                         let _ = notifier.notify();
                     }
                 }
@@ -270,15 +283,19 @@ pub fn run(
             microrobot_runtime::rt::enter_cycle(&rt_cfg, &mut rt);
             (cpu0, wall0) = (cpu_time_s(), monotonic_ns());
             let mut last_seq = 0u64;
-            // A generous guard: stop if nothing arrives for 5 s.
+            let mut heard_ns = monotonic_ns();
             while last_seq < end_ticks {
-                let ready = reactor.wait_ms(5_000)?;
-                if ready.is_empty() {
-                    break;
-                }
+                // An empty wake-up is the timeout or a signal (a stop and continue, a
+                // debugger attaching): only the silence since the last message counts.
+                let ready = reactor.wait_ms(1_000)?;
                 if !ready.contains(on_event) {
+                    if monotonic_ns().saturating_sub(heard_ns) >= SILENCE_GUARD_NS {
+                        stopped_on_silence = true;
+                        break;
+                    }
                     continue;
                 }
+                heard_ns = monotonic_ns();
                 let _ = listener.try_wait(|_| {});
                 wakes += 1;
                 match &hop {
@@ -292,6 +309,7 @@ pub fn run(
                         while let Ok(Some(s)) = sub.receive() {
                             let h = s.header;
                             drop(s);
+                            messages += 1;
                             lost += h.seq.saturating_sub(last_seq + 1);
                             last_seq = h.seq;
                             let out = TorqueCommand {
@@ -313,6 +331,7 @@ pub fn run(
                             let h = s.header;
                             drop(s);
                             hist.record(now.saturating_sub(h.source_stamp_ns));
+                            messages += 1;
                             lost += h.seq.saturating_sub(last_seq + 1);
                             last_seq = h.seq;
                             let out = JointState {
@@ -338,5 +357,7 @@ pub fn run(
         latency: (!hist.is_empty()).then(|| LatencyNs::from(hist.summary())),
         deadline_misses: misses,
         lost_messages: lost,
+        messages,
+        stopped_on_silence,
     })
 }

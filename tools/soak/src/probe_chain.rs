@@ -55,6 +55,8 @@ pub struct LinkSummary {
     pub deadline_misses: u64,
     /// Relay, sink: sequence gaps seen.
     pub lost_messages: u64,
+    /// Source: setpoints published. Relay, sink: messages taken.
+    pub messages: u64,
 }
 
 impl From<LinkReport> for LinkSummary {
@@ -69,6 +71,7 @@ impl From<LinkReport> for LinkSummary {
                 .map(|l| Percentiles::from(&LatencySummary::from(l))),
             deadline_misses: r.deadline_misses,
             lost_messages: r.lost_messages,
+            messages: r.messages,
         }
     }
 }
@@ -82,7 +85,9 @@ pub struct ChainReport {
     pub e2e_latency_us: Percentiles,
     /// Source wake-up − ideal tick, µs (what the planner's lateness is measured against).
     pub source_lateness_us: Percentiles,
+    /// Source: ticks more than one period late.
     pub deadline_misses: u64,
+    /// Setpoints the source published that never reached the sink as torque commands.
     pub lost_messages: u64,
     /// Per link, percent of one core.
     pub cpu_percent: Vec<(Link, f64)>,
@@ -158,6 +163,14 @@ fn run_chain(args: &ProbeChainArgs, cfg: &PipelineConfig) -> anyhow::Result<()> 
         })?;
         let report: LinkReport = serde_json::from_str(&line)
             .with_context(|| format!("the {} link's report `{line}`", link.name()))?;
+        if report.stopped_on_silence {
+            anyhow::bail!(
+                "the {} link heard nothing for {} s and stopped after {} messages: the chain broke, its figures mean nothing",
+                link.name(),
+                microrobot_chain_link::SILENCE_GUARD_NS / 1_000_000_000,
+                report.messages
+            );
+        }
         links.push(LinkSummary::from(report));
     }
     links.sort_by_key(|l| l.link as u8);
@@ -199,7 +212,7 @@ fn summarise(
         e2e_latency_us: sink.latency_us.context("the sink recorded nothing")?,
         source_lateness_us: source.latency_us.context("the source recorded nothing")?,
         deadline_misses: source.deadline_misses,
-        lost_messages: links.iter().map(|r| r.lost_messages).sum(),
+        lost_messages: source.messages.saturating_sub(sink.messages),
         cpu_percent_total: cpu_percent.iter().map(|(_, p)| p).sum(),
         cpu_percent,
         cpu_per_wake_us: if wakes > 0 {
