@@ -296,50 +296,58 @@ pub fn run(
                     continue;
                 }
                 heard_ns = monotonic_ns();
-                let _ = listener.try_wait(|_| {});
                 wakes += 1;
-                match &hop {
-                    Hop::Relay {
-                        sub,
-                        states,
-                        publisher,
-                        notifier,
-                    } => {
-                        take_states(states);
-                        while let Ok(Some(s)) = sub.receive() {
-                            let h = s.header;
-                            drop(s);
-                            messages += 1;
-                            lost += h.seq.saturating_sub(last_seq + 1);
-                            last_seq = h.seq;
-                            let out = TorqueCommand {
-                                header: answer_to(&h),
-                                ..Default::default()
-                            };
-                            if publisher.send_copy(out).is_ok() {
-                                let _ = notifier.notify();
+                // The services' drain rule (`Inbox::drain`): the messages, then the
+                // wake-ups, then the messages that came meanwhile.
+                for pass in 0..2 {
+                    if pass == 1 {
+                        let _ = listener.try_wait(|_| {});
+                    }
+                    match &hop {
+                        Hop::Relay {
+                            sub,
+                            states,
+                            publisher,
+                            notifier,
+                        } => {
+                            if pass == 0 {
+                                take_states(states);
+                            }
+                            while let Ok(Some(s)) = sub.receive() {
+                                let h = s.header;
+                                drop(s);
+                                messages += 1;
+                                lost += h.seq.saturating_sub(last_seq + 1);
+                                last_seq = h.seq;
+                                let out = TorqueCommand {
+                                    header: answer_to(&h),
+                                    ..Default::default()
+                                };
+                                if publisher.send_copy(out).is_ok() {
+                                    let _ = notifier.notify();
+                                }
                             }
                         }
-                    }
-                    Hop::Sink {
-                        sub,
-                        publisher,
-                        notifier,
-                    } => {
-                        while let Ok(Some(s)) = sub.receive() {
-                            let now = monotonic_ns();
-                            let h = s.header;
-                            drop(s);
-                            hist.record(now.saturating_sub(h.source_stamp_ns));
-                            messages += 1;
-                            lost += h.seq.saturating_sub(last_seq + 1);
-                            last_seq = h.seq;
-                            let out = JointState {
-                                header: answer_to(&h),
-                                ..Default::default()
-                            };
-                            if publisher.send_copy(out).is_ok() {
-                                let _ = notifier.notify();
+                        Hop::Sink {
+                            sub,
+                            publisher,
+                            notifier,
+                        } => {
+                            while let Ok(Some(s)) = sub.receive() {
+                                let now = monotonic_ns();
+                                let h = s.header;
+                                drop(s);
+                                hist.record(now.saturating_sub(h.source_stamp_ns));
+                                messages += 1;
+                                lost += h.seq.saturating_sub(last_seq + 1);
+                                last_seq = h.seq;
+                                let out = JointState {
+                                    header: answer_to(&h),
+                                    ..Default::default()
+                                };
+                                if publisher.send_copy(out).is_ok() {
+                                    let _ = notifier.notify();
+                                }
                             }
                         }
                     }

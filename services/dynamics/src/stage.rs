@@ -109,6 +109,43 @@ impl DynamicsStage {
             }
         }
     }
+
+    /// Answers every queued setpoint with its torque command (awake at `woke` for the
+    /// setpoints published before it).
+    fn answer_setpoints(&mut self, ports: &Ports, woke: u64, cycle: &Cycle<'_>) {
+        let cfg = cycle.cfg;
+        // Once a stop is asked for, nothing new is computed (a torque from a state
+        // the shutdown cut off would differ from run to run).
+        while !cycle.shutdown.is_requested() {
+            let Some(r) = ports.setpoints.next() else {
+                break;
+            };
+            let sp = r.msg;
+            let source = sp.header.source_stamp_ns;
+            // Awake for this setpoint: at the wake-up, or, for one published after
+            // it and taken in the same drain, when taken.
+            let awake = if source <= woke { woke } else { monotonic_ns() };
+            if cfg.lockstep {
+                self.await_state_for(sp.header.tick, &ports.states, cycle);
+                if cycle.shutdown.is_requested() {
+                    break;
+                }
+            }
+            let now = monotonic_ns();
+            self.last_setpoint_ns = now;
+            let taken = self
+                .core
+                .compute_from(&sp, r.publisher, now, || r.from_pipeline());
+            if let Ok(mut cmd) = taken {
+                cmd.header.stamp_ns = monotonic_ns();
+                ports.torques.send(cmd);
+                let stamp = cmd.header.stamp_ns;
+                self.latency.record(stamp.saturating_sub(source));
+                self.setpoint_to_awake.record(awake.saturating_sub(source));
+                self.awake_to_torque.record(stamp.saturating_sub(awake));
+            }
+        }
+    }
 }
 
 impl Stage for DynamicsStage {
@@ -132,39 +169,13 @@ impl Stage for DynamicsStage {
         let cfg = cycle.cfg;
         if ready.contains(on.setpoint) {
             let woke = monotonic_ns();
-            ports.setpoints.clear_events();
             self.take_states(&ports.states);
-            // Once a stop is asked for, nothing new is computed (a torque from a state
-            // the shutdown cut off would differ from run to run).
-            while !cycle.shutdown.is_requested() {
-                let Some(r) = ports.setpoints.next() else {
-                    break;
-                };
-                let sp = r.msg;
-                let source = sp.header.source_stamp_ns;
-                // Awake for this setpoint: at the wake-up, or, for one published after
-                // it and taken in the same drain, when taken.
-                let awake = if source <= woke { woke } else { monotonic_ns() };
-                if cfg.lockstep {
-                    self.await_state_for(sp.header.tick, &ports.states, cycle);
-                    if cycle.shutdown.is_requested() {
-                        break;
-                    }
-                }
-                let now = monotonic_ns();
-                self.last_setpoint_ns = now;
-                let taken = self
-                    .core
-                    .compute_from(&sp, r.publisher, now, || r.from_pipeline());
-                if let Ok(mut cmd) = taken {
-                    cmd.header.stamp_ns = monotonic_ns();
-                    ports.torques.send(cmd);
-                    let stamp = cmd.header.stamp_ns;
-                    self.latency.record(stamp.saturating_sub(source));
-                    self.setpoint_to_awake.record(awake.saturating_sub(source));
-                    self.awake_to_torque.record(stamp.saturating_sub(awake));
-                }
-            }
+            // The drain rule (see `Inbox::drain`): the setpoints, then the wake-ups, then
+            // the setpoints that came meanwhile; the wake-ups' read is not between the
+            // wake-up and the torque.
+            self.answer_setpoints(ports, woke, cycle);
+            ports.setpoints.clear_events();
+            self.answer_setpoints(ports, woke, cycle);
         }
         if ready.contains(on.timer) {
             let _ = ports.timer.read_expirations();

@@ -202,13 +202,21 @@ where
         }
     }
 
-    /// The drain rule: the pending wake-ups, then every queued message. Every queued
-    /// message, not one per event: a sample can become visible after its notification
-    /// (a sender's new connection), and events coalesce.
+    /// The drain rule: every queued message, then the pending wake-ups, then every
+    /// message that came meanwhile. Every queued message, not one per event: a sample
+    /// can become visible after its notification (a sender's new connection), and
+    /// events coalesce. The wake-ups are consumed after the messages, not before: that
+    /// read is a syscall (about 1.3 µs on the reference VM) and would otherwise sit
+    /// between the wake-up and the answer. A notifier sends no wake-up while one is
+    /// pending, so what arrived before the wake-ups were consumed is taken by the
+    /// second pass, and what arrives after wakes the stage again.
     #[inline]
-    pub fn drain(&self, f: impl FnMut(Received<'_, T>)) {
-        self.clear_events();
-        self.for_each(f);
+    pub fn drain(&self, mut f: impl FnMut(Received<'_, T>)) {
+        self.for_each(&mut f);
+        if self.listener.is_some() {
+            self.clear_events();
+            self.for_each(f);
+        }
     }
 }
 
