@@ -282,6 +282,25 @@ fn free_running_run_reports_the_timer_floor_and_cpu_shares() {
     assert!(summary(&without)["floor"].is_null());
 }
 
+/// `microrobot probe-chain` at 500 Hz for `duration` with `cfg`, its report in `json`.
+fn chain_probe_args<'a>(
+    cfg: &'a std::path::Path,
+    json: &'a std::path::Path,
+    duration: &'a str,
+) -> Vec<&'a str> {
+    vec![
+        "probe-chain",
+        "--config",
+        cfg.to_str().expect("utf-8"),
+        "--rate-hz",
+        "500",
+        "--duration",
+        duration,
+        "--json",
+        json.to_str().expect("utf-8"),
+    ]
+}
+
 /// `microrobot probe-chain`: three bare processes with the pipeline's hops report the
 /// end-to-end latency of every setpoint that came through (or count it lost), the
 /// source's lateness per tick, and CPU per link. Figures are reported, not asserted.
@@ -291,20 +310,7 @@ fn chain_probe_accounts_for_every_tick_and_reports_cpu_per_link() {
     let inst = instance("chain");
     let cfg = write_config(dir.path(), &inst, "", "");
     let json = dir.path().join("chain.json");
-    let out = run(
-        &[
-            "probe-chain",
-            "--config",
-            cfg.to_str().expect("utf-8"),
-            "--rate-hz",
-            "500",
-            "--duration",
-            "2s",
-            "--json",
-            json.to_str().expect("utf-8"),
-        ],
-        120.0,
-    );
+    let out = run(&chain_probe_args(&cfg, &json, "2s"), 120.0);
     assert_eq!(out.code(), Some(0), "stderr:\n{}", out.stderr);
     assert!(out.stdout.contains("end-to-end"), "{}", out.stdout);
     let r = summary(&json);
@@ -356,17 +362,7 @@ fn chain_probe_rides_out_a_stopped_and_continued_link() {
     let inst = instance("chain-stop");
     let cfg = write_config(dir.path(), &inst, "", "");
     let json = dir.path().join("chain.json");
-    let probe = start(&[
-        "probe-chain",
-        "--config",
-        cfg.to_str().expect("utf-8"),
-        "--rate-hz",
-        "500",
-        "--duration",
-        "3s",
-        "--json",
-        json.to_str().expect("utf-8"),
-    ]);
+    let probe = start(&chain_probe_args(&cfg, &json, "3s"));
     let t0 = std::time::Instant::now();
     let relay = loop {
         // The source starts last, after the relay says ready.
