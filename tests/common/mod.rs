@@ -39,8 +39,15 @@ pub fn workspace_binary(name: &str, package: &str, dirs: &[&str]) -> PathBuf {
         .filter_map(|s| newest_mtime(&repo().join(s)))
         .max();
     if built.is_none() || newest > built {
+        // The profile of the `microrobot` under test (`target/debug` is `dev`), so that a
+        // `cargo test --release` rebuilds the binary it runs, not a debug one beside it.
+        let dir = exe.parent().and_then(Path::file_name);
+        let profile = match dir.and_then(|d| d.to_str()) {
+            Some("debug") | None => "dev",
+            Some(p) => p,
+        };
         let status = Command::new(env!("CARGO"))
-            .args(["build", "-p", package, "--bin", name])
+            .args(["build", "--profile", profile, "-p", package, "--bin", name])
             .current_dir(repo())
             .status()
             .unwrap_or_else(|e| panic!("cargo build -p {package}: {e}"));
