@@ -147,6 +147,74 @@ enum Hop {
     },
 }
 
+/// The sequence numbers a relay or sink has taken.
+#[derive(Default)]
+struct Tally {
+    last_seq: u64,
+    /// Sequence gaps seen.
+    lost: u64,
+    messages: u64,
+}
+
+impl Tally {
+    /// Counts the message headed `h`.
+    fn count(&mut self, h: &Header) {
+        self.messages += 1;
+        self.lost += h.seq.saturating_sub(self.last_seq + 1);
+        self.last_seq = h.seq;
+    }
+}
+
+impl Hop {
+    /// Answers every queued message (the relay takes its states first when `first_pass`).
+    fn take(&self, first_pass: bool, tally: &mut Tally, hist: &mut LatencyHistogram) {
+        match self {
+            Hop::Relay {
+                sub,
+                states,
+                publisher,
+                notifier,
+            } => {
+                if first_pass {
+                    take_states(states);
+                }
+                while let Ok(Some(s)) = sub.receive() {
+                    let h = s.header;
+                    drop(s);
+                    tally.count(&h);
+                    let out = TorqueCommand {
+                        header: answer_to(&h),
+                        ..Default::default()
+                    };
+                    if publisher.send_copy(out).is_ok() {
+                        let _ = notifier.notify();
+                    }
+                }
+            }
+            Hop::Sink {
+                sub,
+                publisher,
+                notifier,
+            } => {
+                while let Ok(Some(s)) = sub.receive() {
+                    let now = monotonic_ns();
+                    let h = s.header;
+                    drop(s);
+                    hist.record(now.saturating_sub(h.source_stamp_ns));
+                    tally.count(&h);
+                    let out = JointState {
+                        header: answer_to(&h),
+                        ..Default::default()
+                    };
+                    if publisher.send_copy(out).is_ok() {
+                        let _ = notifier.notify();
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// The header of the message answering one headed `h`: its sequence number, tick and
 /// source stamp, stamped now.
 fn answer_to(h: &Header) -> Header {
@@ -210,9 +278,9 @@ pub fn run(
     let end_ticks = (duration_s * cfg.rate_hz).round().max(1.0) as u64;
     let mut hist = LatencyHistogram::new();
     let mut wakes = 0u64;
-    let mut lost = 0u64;
     let mut misses = 0u64;
     let mut messages = 0u64;
+    let mut lost = 0u64;
     let mut stopped_on_silence = false;
     let (cpu0, wall0, cpu1, wall1);
     match link {
@@ -282,9 +350,9 @@ pub fn run(
             let on_event = reactor.add(&listener)?;
             microrobot_runtime::rt::enter_cycle(&rt_cfg, &mut rt);
             (cpu0, wall0) = (cpu_time_s(), monotonic_ns());
-            let mut last_seq = 0u64;
+            let mut tally = Tally::default();
             let mut heard_ns = monotonic_ns();
-            while last_seq < end_ticks {
+            while tally.last_seq < end_ticks {
                 // An empty wake-up is the timeout or a signal (a stop and continue, a
                 // debugger attaching): only the silence since the last message counts.
                 let ready = reactor.wait_ms(1_000)?;
@@ -303,57 +371,11 @@ pub fn run(
                     if pass == 1 {
                         let _ = listener.try_wait(|_| {});
                     }
-                    match &hop {
-                        Hop::Relay {
-                            sub,
-                            states,
-                            publisher,
-                            notifier,
-                        } => {
-                            if pass == 0 {
-                                take_states(states);
-                            }
-                            while let Ok(Some(s)) = sub.receive() {
-                                let h = s.header;
-                                drop(s);
-                                messages += 1;
-                                lost += h.seq.saturating_sub(last_seq + 1);
-                                last_seq = h.seq;
-                                let out = TorqueCommand {
-                                    header: answer_to(&h),
-                                    ..Default::default()
-                                };
-                                if publisher.send_copy(out).is_ok() {
-                                    let _ = notifier.notify();
-                                }
-                            }
-                        }
-                        Hop::Sink {
-                            sub,
-                            publisher,
-                            notifier,
-                        } => {
-                            while let Ok(Some(s)) = sub.receive() {
-                                let now = monotonic_ns();
-                                let h = s.header;
-                                drop(s);
-                                hist.record(now.saturating_sub(h.source_stamp_ns));
-                                messages += 1;
-                                lost += h.seq.saturating_sub(last_seq + 1);
-                                last_seq = h.seq;
-                                let out = JointState {
-                                    header: answer_to(&h),
-                                    ..Default::default()
-                                };
-                                if publisher.send_copy(out).is_ok() {
-                                    let _ = notifier.notify();
-                                }
-                            }
-                        }
-                    }
+                    hop.take(pass == 0, &mut tally, &mut hist);
                 }
             }
             (cpu1, wall1) = (cpu_time_s(), monotonic_ns());
+            (messages, lost) = (tally.messages, tally.lost);
         }
     }
     drop(rt);
