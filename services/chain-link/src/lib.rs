@@ -160,7 +160,7 @@ impl Tally {
     /// Counts the message headed `h`.
     fn count(&mut self, h: &Header) {
         self.messages += 1;
-        self.lost += h.seq.saturating_sub(self.last_seq + 1);
+        self.lost += h.seq.saturating_sub(self.last_seq.saturating_add(1));
         self.last_seq = h.seq;
     }
 }
