@@ -108,6 +108,14 @@ impl DynamicsStage {
                 None => std::thread::yield_now(),
             }
         }
+        if self.core.state_tick().is_none_or(|t| t + 1 < tick) && !cycle.shutdown.is_requested() {
+            // At most once per `fault_ms`: the wait above is that long.
+            tracing::warn!(
+                "dynamics: lockstep setpoint of tick {tick} found no measured state of tick {} within fault_ms (newest: {:?})",
+                tick.saturating_sub(1),
+                self.core.state_tick()
+            );
+        }
     }
 
     /// Answers every queued setpoint with its torque command (awake at `woke` for the

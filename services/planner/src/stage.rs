@@ -98,8 +98,10 @@ pub fn run(cfg: &PipelineConfig, shutdown: &Shutdown) -> anyhow::Result<()> {
             timer,
         };
         if cfg.lockstep {
-            // The first setpoint answers the initial state.
-            ports.setpoints.send(core.tick(monotonic_ns()));
+            // The first setpoint answers the initial state; the loop runs on it alone.
+            if !ports.setpoints.send(core.tick(monotonic_ns())) {
+                anyhow::bail!("the first lockstep setpoint could not be published");
+            }
         }
         let stage = PlannerStage {
             core,

@@ -11,6 +11,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::port::{DegradationAction, DegradationCause, DegradationInfo};
 use iceoryx2::prelude::*;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 use microrobot_messages::{Topic, open_event, open_publish_subscribe, service_name};
@@ -99,6 +100,7 @@ pub struct Inbox<T: Payload> {
     // is touched only on a new publisher, never across threads.
     provenance: RefCell<Provenance>,
     name: String,
+    receive_errors: std::cell::Cell<u64>,
 }
 
 impl<T> Inbox<T>
@@ -115,7 +117,10 @@ where
     ) -> anyhow::Result<Self> {
         let name = service_name(instance, topic.kind());
         let service = open_publish_subscribe::<T>(node, instance, topic.kind())?;
-        let builder = service.subscriber_builder().history_request(how.history);
+        let builder = service
+            .subscriber_builder()
+            .history_request(how.history)
+            .set_degradation_handler(connection_failed(name.clone(), "subscriber"));
         let builder = match how.queue {
             Some(n) => builder.buffer_size(n),
             None => builder,
@@ -139,6 +144,7 @@ where
             listener,
             provenance: RefCell::new(Provenance::from_env()),
             name,
+            receive_errors: std::cell::Cell::new(0),
         })
     }
 
@@ -183,7 +189,17 @@ where
     /// sequence numbers show what was lost).
     #[inline]
     pub fn next(&self) -> Option<Received<'_, T>> {
-        let sample = self.subscriber.receive().ok()??;
+        let sample = match self.subscriber.receive() {
+            Ok(s) => s?,
+            Err(e) => {
+                let n = self.receive_errors.get() + 1;
+                self.receive_errors.set(n);
+                if n.is_power_of_two() {
+                    tracing::warn!("{}: receive failed ({n} times so far): {e:?}", self.name);
+                }
+                return None;
+            }
+        };
         let msg = *sample;
         let publisher = sample.header().publisher_id().value();
         drop(sample);
@@ -224,6 +240,8 @@ where
 pub struct Outbox<T: Payload> {
     publisher: Publisher<ipc::Service, T, ()>,
     notifier: Notifier<ipc::Service>,
+    name: String,
+    send_errors: std::cell::Cell<u64>,
 }
 
 impl<T> Outbox<T>
@@ -239,6 +257,7 @@ where
         let name = service_name(instance, topic.kind());
         let publisher = open_publish_subscribe::<T>(node, instance, topic.kind())?
             .publisher_builder()
+            .set_degradation_handler(connection_failed(name.clone(), "publisher"))
             .create()
             .map_err(|e| anyhow::anyhow!("cannot publish on {name}: {e:?}"))?;
         let notifier = open_event(node, instance, topic.kind())?
@@ -248,21 +267,54 @@ where
         Ok(Self {
             publisher,
             notifier,
+            name,
+            send_errors: std::cell::Cell::new(0),
         })
     }
 
     /// Sends `msg` and wakes the subscribers; `false` when it could not be sent.
     #[inline]
     pub fn send(&self, msg: T) -> bool {
-        let sent = self.publisher.send_copy(msg).is_ok();
-        if sent {
-            let _ = self.notifier.notify();
+        match self.publisher.send_copy(msg) {
+            Ok(_) => {
+                let _ = self.notifier.notify();
+                true
+            }
+            Err(e) => {
+                let n = self.send_errors.get() + 1;
+                self.send_errors.set(n);
+                if n.is_power_of_two() {
+                    tracing::warn!("{}: send failed ({n} times so far): {e:?}", self.name);
+                }
+                false
+            }
         }
-        sent
     }
 
     /// Hands the stored history to subscribers that joined since the last send.
     pub fn update_connections(&self) {
         let _ = self.publisher.update_connections();
+    }
+}
+
+/// The degradation handler of every port: a connection iceoryx2 could not establish (or
+/// found corrupted) is logged with the stream and both ports, where iceoryx2's own
+/// warning would fall below the services' log level. The port carries on with its other
+/// connections, as iceoryx2's default does.
+fn connection_failed(
+    stream: String,
+    side: &'static str,
+) -> impl Fn(DegradationCause, &DegradationInfo) -> DegradationAction + Send + 'static {
+    move |cause, info| {
+        let what = match cause {
+            DegradationCause::FailedToEstablishConnection => "could not connect",
+            DegradationCause::ConnectionCorrupted => "found a corrupted connection",
+        };
+        tracing::warn!(
+            "{stream}: the {side} {what} (publisher port {:032x}, subscriber port {:032x})",
+            info.sender_port_id,
+            info.receiver_port_id
+        );
+        DegradationAction::Ignore
     }
 }
