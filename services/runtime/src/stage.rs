@@ -57,11 +57,6 @@ pub struct Cycle<'a> {
     /// The status the runner publishes (a stage writes what [`Stage::report`] cannot
     /// know afterwards, e.g. the verdict of a command it just took).
     pub status: &'a mut ServiceStatus,
-    /// True on the first wake-up and on the first one after each periodic status: the
-    /// wake-up to sweep an inbox that is otherwise taken only when its own event wakes
-    /// the stage (see [`crate::Inbox::drain`] on samples seen after their
-    /// notification), so nothing waits longer than a status period.
-    pub sweep: bool,
     status_port: &'a mut StatusPort,
     publish_status: bool,
 }
@@ -151,7 +146,6 @@ pub fn serve<S: Stage>(
 
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
     let mut housekeeping = crate::enter_cycle(cfg);
-    let mut sweep = true;
     while !shutdown.is_requested() {
         let ready = reactor.wait().context("epoll_wait")?;
         if ready.contains(on_stop) || shutdown.is_requested() {
@@ -163,13 +157,11 @@ pub fn serve<S: Stage>(
             status: &mut status,
             status_port: &mut status_port,
             publish_status: false,
-            sweep,
         };
         stage.wake(&ports, on, ready, &mut cycle)?;
         let asked = cycle.publish_status;
         let now = monotonic_ns();
-        sweep = status_port.due(now);
-        if asked || sweep {
+        if asked || status_port.due(now) {
             // Below the cycle's priority: the stage this wake-up's message woke goes first.
             housekeeping.run(|| {
                 stage.report(&mut status);
