@@ -1,8 +1,9 @@
 //! Per-process real-time settings: CPU affinity, PM QoS (`/dev/cpu_dma_latency`), timer
 //! slack, SCHED_FIFO and mlockall. Each one is applied independently; one that is not
 //! permitted (or not possible on this machine) logs exactly one warning and the service
-//! goes on without it. Defaults are the measured best for this 2-vCPU VM
-//! (`notes/machine-floors.md`): all stages pinned to one CPU, PM QoS 0, 1 ns slack.
+//! goes on without it. Defaults are the best measured on the reference 2-vCPU VM (a
+//! three-process iceoryx2 chain, 60 s per setting, 2026-11-22): all stages pinned to one
+//! CPU, PM QoS 0, 1 ns slack.
 
 use std::fs::File;
 use std::io::Write;
