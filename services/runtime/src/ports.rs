@@ -185,8 +185,9 @@ where
         }
     }
 
-    /// The next queued message, if any (a receive error counts as none: the stream's
-    /// sequence numbers show what was lost).
+    /// The next queued message, if any. A receive error counts as none (the stream's
+    /// sequence numbers show what was lost) and is logged, the first time and at each
+    /// power of two of their count.
     #[inline]
     pub fn next(&self) -> Option<Received<'_, T>> {
         let sample = match self.subscriber.receive() {
@@ -272,7 +273,8 @@ where
         })
     }
 
-    /// Sends `msg` and wakes the subscribers; `false` when it could not be sent.
+    /// Sends `msg` and wakes the subscribers; `false` when it could not be sent (logged,
+    /// the first time and at each power of two of the failures' count).
     #[inline]
     pub fn send(&self, msg: T) -> bool {
         match self.publisher.send_copy(msg) {
