@@ -99,22 +99,27 @@ impl DynamicsStage {
     /// the actuator has latched its safe state anyway) or until a stop is asked for.
     fn await_state_for(&mut self, tick: u64, states: &Inbox<JointState>, cycle: &Cycle<'_>) {
         let give_up = monotonic_ns() + cycle.cfg.watchdog.fault_ns();
-        while self.core.state_tick().is_none_or(|t| t + 1 < tick)
-            && monotonic_ns() < give_up
-            && !cycle.shutdown.is_requested()
-        {
+        loop {
+            let arrived = self
+                .core
+                .state_tick()
+                .is_some_and(|t| t.saturating_add(1) >= tick);
+            if arrived || cycle.shutdown.is_requested() {
+                return;
+            }
+            if monotonic_ns() >= give_up {
+                // At most once per `fault_ms`: the wait was that long.
+                tracing::warn!(
+                    "dynamics: lockstep setpoint of tick {tick} found no measured state of tick {} within fault_ms (newest: {:?})",
+                    tick.saturating_sub(1),
+                    self.core.state_tick()
+                );
+                return;
+            }
             match states.next() {
                 Some(r) => self.take_state(&r),
                 None => std::thread::yield_now(),
             }
-        }
-        if self.core.state_tick().is_none_or(|t| t + 1 < tick) && !cycle.shutdown.is_requested() {
-            // At most once per `fault_ms`: the wait above is that long.
-            tracing::warn!(
-                "dynamics: lockstep setpoint of tick {tick} found no measured state of tick {} within fault_ms (newest: {:?})",
-                tick.saturating_sub(1),
-                self.core.state_tick()
-            );
         }
     }
 

@@ -100,7 +100,7 @@ pub struct Inbox<T: Payload> {
     // is touched only on a new publisher, never across threads.
     provenance: RefCell<Provenance>,
     name: String,
-    receive_errors: std::cell::Cell<u64>,
+    receive_failures: Failures,
 }
 
 impl<T> Inbox<T>
@@ -144,7 +144,7 @@ where
             listener,
             provenance: RefCell::new(Provenance::from_env()),
             name,
-            receive_errors: std::cell::Cell::new(0),
+            receive_failures: Failures::default(),
         })
     }
 
@@ -193,11 +193,7 @@ where
         let sample = match self.subscriber.receive() {
             Ok(s) => s?,
             Err(e) => {
-                let n = self.receive_errors.get() + 1;
-                self.receive_errors.set(n);
-                if n.is_power_of_two() {
-                    tracing::warn!("{}: receive failed ({n} times so far): {e:?}", self.name);
-                }
+                self.receive_failures.record(&self.name, "receive", &e);
                 return None;
             }
         };
@@ -242,7 +238,7 @@ pub struct Outbox<T: Payload> {
     publisher: Publisher<ipc::Service, T, ()>,
     notifier: Notifier<ipc::Service>,
     name: String,
-    send_errors: std::cell::Cell<u64>,
+    send_failures: Failures,
 }
 
 impl<T> Outbox<T>
@@ -269,7 +265,7 @@ where
             publisher,
             notifier,
             name,
-            send_errors: std::cell::Cell::new(0),
+            send_failures: Failures::default(),
         })
     }
 
@@ -283,11 +279,7 @@ where
                 true
             }
             Err(e) => {
-                let n = self.send_errors.get() + 1;
-                self.send_errors.set(n);
-                if n.is_power_of_two() {
-                    tracing::warn!("{}: send failed ({n} times so far): {e:?}", self.name);
-                }
+                self.send_failures.record(&self.name, "send", &e);
                 false
             }
         }
@@ -296,6 +288,24 @@ where
     /// Hands the stored history to subscribers that joined since the last send.
     pub fn update_connections(&self) {
         let _ = self.publisher.update_connections();
+    }
+}
+
+/// The failed calls of one port: counted, and logged the first time and at each power of
+/// two of their count, so a persistent failure is seen without a log line per cycle.
+#[derive(Default)]
+struct Failures(std::cell::Cell<u64>);
+
+impl Failures {
+    /// Off the hot path: only a failed call comes here.
+    #[cold]
+    #[inline(never)]
+    fn record(&self, stream: &str, call: &str, error: &dyn std::fmt::Debug) {
+        let n = self.0.get().saturating_add(1);
+        self.0.set(n);
+        if n.is_power_of_two() {
+            tracing::warn!("{stream}: {call} failed ({n} times so far): {error:?}");
+        }
     }
 }
 
