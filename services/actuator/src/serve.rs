@@ -566,9 +566,11 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
         if ready.contains(on.torque) {
             self.take_torques(ports, cycle, &mut was_latched);
         }
-        // Commands are looked at on every wake-up (see the planner: a new sender's sample
-        // can become visible after its notification).
-        self.take_commands(ports, cycle, ready.contains(on.command));
+        // Resets on their event, and at the runner's sweep (`Cycle::sweep`).
+        let woken = ready.contains(on.command);
+        if woken || cycle.sweep {
+            self.take_commands(ports, cycle, woken);
+        }
         if ready.contains(on.timer) {
             self.on_timer(ports, cfg);
         }

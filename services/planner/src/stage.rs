@@ -1,7 +1,8 @@
 //! The planner service's stage: the pipeline's clock. It waits for the actuator's
 //! measured state, then ticks on its own timer (or, ticking on states, on each new
-//! measured state), publishing one setpoint per tick; commands and master samples are
-//! taken on every wake-up.
+//! measured state), publishing one setpoint per tick. Commands are taken when their
+//! event wakes it and at the runner's sweep ([`Cycle::sweep`]); master samples at every
+//! wake-up in teleop mode, otherwise at the sweep.
 
 use microrobot_messages::{
     JointSetpoint, JointState, LifecycleState, MasterPose, MotionCommand, RefusalQuantity,
@@ -251,13 +252,19 @@ impl Stage for PlannerStage {
         ready: Ready,
         cycle: &mut Cycle<'_>,
     ) -> anyhow::Result<()> {
-        // Commands are drained on every wake-up, not only on their event: a sample can
-        // become visible after its notification when the sender's connection is new.
-        self.take_commands(ports, ready.contains(on.command), cycle);
-        // Master samples: the newest valid one is used at the next tick.
-        ports.master.for_each(|r| {
-            self.core.on_master(&r.msg, r.publisher, monotonic_ns());
-        });
+        // Commands on their event, and at the sweep (`Cycle::sweep`: a new sender is
+        // connected to before it can leave with its command).
+        let woken = ready.contains(on.command);
+        if woken || cycle.sweep {
+            self.take_commands(ports, woken, cycle);
+        }
+        // Master samples: the newest valid one is used at the next tick. Taken at every
+        // wake-up in teleop mode, otherwise at the sweep (counted, the queue kept short).
+        if cycle.sweep || self.core.mode() == Mode::Teleop {
+            ports.master.for_each(|r| {
+                self.core.on_master(&r.msg, r.publisher, monotonic_ns());
+            });
+        }
         if ready.contains_opt(on.state) || !self.on_states {
             self.take_states(ports);
         }

@@ -34,7 +34,7 @@ pub use node::{InstanceInUse, open_node, waitset};
 pub use ports::{Inbox, Outbox, Received, Subscription};
 pub use reactor::{Reactor, Ready, Source};
 pub use shutdown::Shutdown;
-pub use stage::{Cycle, SetUp, Stage, serve};
+pub use stage::{Cycle, SWEEP_NS, SetUp, Stage, serve};
 pub use status::StatusPort;
 pub use timer::{PeriodicClock, Tick, TickTimer, Ticker, TimerFd};
 pub use watchdog::{Freshness, Watchdog};
