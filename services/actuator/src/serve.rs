@@ -468,13 +468,11 @@ impl<B: ActuatorBackend> ActuatorStage<B> {
         true
     }
 
+    /// The resets, on their event and at the sweep ([`Inbox::take_on_demand`]).
     fn take_commands(&mut self, ports: &Ports, cycle: &mut Cycle<'_>, woken: bool) {
-        let cfg = cycle.cfg;
+        let (cfg, sweep) = (cycle.cfg, cycle.sweep);
         let budget = self.hook_budget_ms;
-        if woken {
-            ports.commands.clear_events();
-        }
-        ports.commands.for_each(|r| {
+        ports.commands.take_on_demand(woken, sweep, |r| {
             if CommandKind::from_wire(r.msg.kind) == Some(CommandKind::Reset)
                 && self.core.reset(monotonic_ns(), &mut |hook| {
                     announce_hook(cycle, hook, budget)
@@ -566,11 +564,7 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
         if ready.contains(on.torque) {
             self.take_torques(ports, cycle, &mut was_latched);
         }
-        // Resets on their event, and at the runner's sweep (`Cycle::sweep`).
-        let woken = ready.contains(on.command);
-        if woken || cycle.sweep {
-            self.take_commands(ports, cycle, woken);
-        }
+        self.take_commands(ports, cycle, ready.contains(on.command));
         if ready.contains(on.timer) {
             self.on_timer(ports, cfg);
         }

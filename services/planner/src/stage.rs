@@ -153,12 +153,11 @@ struct PlannerStage {
 }
 
 impl PlannerStage {
+    /// The commands, on their event and at the sweep ([`Inbox::take_on_demand`]).
     fn take_commands(&mut self, ports: &Ports, woken: bool, cycle: &mut Cycle<'_>) {
-        if woken {
-            ports.commands.clear_events();
-        }
         let mut took = false;
-        ports.commands.for_each(|r| {
+        let sweep = cycle.sweep;
+        ports.commands.take_on_demand(woken, sweep, |r| {
             let c = r.msg;
             let verdict = self.core.on_command(&c, monotonic_ns());
             match &verdict {
@@ -252,12 +251,7 @@ impl Stage for PlannerStage {
         ready: Ready,
         cycle: &mut Cycle<'_>,
     ) -> anyhow::Result<()> {
-        // Commands on their event, and at the sweep (`Cycle::sweep`: a new sender is
-        // connected to before it can leave with its command).
-        let woken = ready.contains(on.command);
-        if woken || cycle.sweep {
-            self.take_commands(ports, woken, cycle);
-        }
+        self.take_commands(ports, ready.contains(on.command), cycle);
         // Master samples: the newest valid one is used at the next tick. Taken at every
         // wake-up in teleop mode, otherwise at the sweep (counted, the queue kept short).
         if cycle.sweep || self.core.mode() == Mode::Teleop {

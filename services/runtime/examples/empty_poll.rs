@@ -10,7 +10,12 @@ use microrobot_messages::{MotionCommand, monotonic_ns, topic};
 use microrobot_runtime::{Inbox, Subscription};
 
 fn main() -> anyhow::Result<()> {
-    let polls: usize = std::env::args().nth(1).map_or(Ok(20_000), |s| s.parse())?;
+    let polls: usize = match std::env::args().nth(1) {
+        None => 20_000,
+        Some(s) => s
+            .parse()
+            .map_err(|e| anyhow::anyhow!("POLLS must be a whole number, got `{s}`: {e}"))?,
+    };
     anyhow::ensure!(polls > 0, "POLLS must be at least 1");
     let instance = format!("empty-poll-{}", std::process::id());
     let node = microrobot_runtime::node::named_node(&instance)?;

@@ -231,6 +231,19 @@ where
             self.for_each(f);
         }
     }
+
+    /// An inbox taken on demand (commands): [`Self::drain`] when its own event woke the
+    /// stage (`woken`), every queued message at the runner's sweep (`sweep`,
+    /// [`crate::Cycle::sweep`]: what came without its event, and the connection to a new
+    /// publisher made before that publisher can leave), nothing otherwise.
+    #[inline]
+    pub fn take_on_demand(&self, woken: bool, sweep: bool, f: impl FnMut(Received<'_, T>)) {
+        if woken {
+            self.drain(f);
+        } else if sweep {
+            self.for_each(f);
+        }
+    }
 }
 
 /// A publisher of one typed stream and the notifier that wakes its subscribers.

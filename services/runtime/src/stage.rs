@@ -57,10 +57,12 @@ pub struct Cycle<'a> {
     /// The status the runner publishes (a stage writes what [`Stage::report`] cannot
     /// know afterwards, e.g. the verdict of a command it just took).
     pub status: &'a mut ServiceStatus,
-    /// True on the first wake-up and then on the first one at least [`SWEEP_NS`] after
-    /// the last sweep: the wake-up to look at an inbox the stage otherwise takes only
-    /// when its own event wakes it (commands), or only while it is in use (the master
-    /// device's samples). See [`SWEEP_NS`] for why that loses nothing.
+    /// True on the first wake-up, and on a wake-up whose predecessor ended at least
+    /// [`SWEEP_NS`] after the last sweep (the runner reads the clock only after each
+    /// wake-up; with wake-ups every period `p`, sweeps are at most `SWEEP_NS + p` apart):
+    /// the wake-up to look at an inbox the stage otherwise takes only when its own event
+    /// wakes it (commands, [`crate::Inbox::take_on_demand`]), or only while it is in use
+    /// (the master device's samples). See [`SWEEP_NS`] for why that loses nothing.
     pub sweep: bool,
     status_port: &'a mut StatusPort,
     publish_status: bool,
@@ -77,9 +79,10 @@ pub struct Cycle<'a> {
 /// and if that publisher is gone by the time of the receive its sample is gone with it
 /// (iceoryx2 0.10; a subscriber connected before the publisher leaves keeps the sample).
 /// A stage blocked past a short-lived sender's life, or an event that never came, would
-/// then lose a command. The sweep connects each inbox to a new publisher within 1 ms of
-/// its appearance, and `microrobot send` waits at least 20 ms between creating its
-/// publisher and sending (the bus contract asks the same of every short-lived sender).
+/// then lose a command. The sweep connects each inbox to a new publisher within 1 ms and
+/// a period of its appearance, and `microrobot send` waits at least 20 ms between
+/// creating its publisher and sending (the bus contract asks the same of every
+/// short-lived sender).
 pub const SWEEP_NS: u64 = 1_000_000;
 
 impl Cycle<'_> {
@@ -167,7 +170,8 @@ pub fn serve<S: Stage>(
 
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
     let mut housekeeping = crate::enter_cycle(cfg);
-    // The first wake-up sweeps; after that, the first one `SWEEP_NS` after the last.
+    // The first wake-up sweeps; after that, the one after a wake-up that ended
+    // `SWEEP_NS` or more after the last sweep.
     let (mut sweep, mut swept_ns) = (true, 0);
     while !shutdown.is_requested() {
         let ready = reactor.wait().context("epoll_wait")?;

@@ -43,8 +43,8 @@ struct Sources {
     tick: Source,
 }
 
-/// Ticks at 4 kHz and takes commands the way the planner and the actuator do: on their
-/// event, or at the sweep. When `block` is set, its next wake-up blocks for 100 ms
+/// Ticks at 4 kHz and takes commands the way the planner and the actuator do
+/// (`Inbox::take_on_demand`): on their event, or at the sweep. When `block` is set, its next wake-up blocks for 100 ms
 /// first (a lifecycle hook that takes its time).
 struct Sweeper {
     seen: mpsc::Sender<Seen>,
@@ -80,14 +80,12 @@ impl Stage for Sweeper {
             let _ = self.seen.send(Seen::Sweep);
         }
         let woken = ready.contains(on.command);
-        if woken || cycle.sweep {
-            ports.commands.drain(|r| {
-                let _ = self.seen.send(Seen::Command {
-                    seq: r.msg.seq,
-                    woken,
-                });
+        ports.commands.take_on_demand(woken, cycle.sweep, |r| {
+            let _ = self.seen.send(Seen::Command {
+                seq: r.msg.seq,
+                woken,
             });
-        }
+        });
         Ok(())
     }
 
