@@ -602,12 +602,6 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
         st.clamped_cycles = core.counters.saturated_cycles + core.counters.slope_limited_cycles;
         st.faults = core.counters.faults;
         st.motion_time_s = core.motion_time_s();
-        st.latency = self.e2e.summary();
-        st.latency_sum_ns = self.e2e.sum_ns();
-        st.hops = [
-            self.torque_to_taken.hop_latency(),
-            self.step_to_state.hop_latency(),
-        ];
         st.tracking_error_max = core.tracking_error_max;
         st.peak_torque = core.peak_torque;
         st.last_input_refusal = core
@@ -620,6 +614,15 @@ impl<B: ActuatorBackend> Stage for ActuatorStage<B> {
         // Out of any hook (see `announce_hook`).
         st.hook = LifecycleHook::None as u32;
         st.hook_budget_ms = 0;
+    }
+
+    fn report_latency(&self, st: &mut ServiceStatus) {
+        st.latency = self.e2e.summary();
+        st.latency_sum_ns = self.e2e.sum_ns();
+        st.hops = [
+            self.torque_to_taken.hop_latency(),
+            self.step_to_state.hop_latency(),
+        ];
     }
 
     /// Safe on the way out, however the stop was asked for (Ctrl-C, SIGTERM, the

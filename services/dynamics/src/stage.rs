@@ -213,16 +213,19 @@ impl Stage for DynamicsStage {
         st.stale_cycles = core.counters.stale_cycles + self.input_stale_periods;
         // Effort clamps and slew limits together (the torque flags tell them apart).
         st.clamped_cycles = core.counters.clamped_cycles + core.counters.slew_limited_cycles;
+        st.peak_torque = core.peak_torque;
+        st.motion_time_s = core.last_tick().unwrap_or(0) as f64 / self.rate_hz;
+        st.last_input_refusal = core
+            .last_refusal
+            .map_or(RefusalReason::None, Refusal::reason) as u32;
+    }
+
+    fn report_latency(&self, st: &mut ServiceStatus) {
         st.latency = self.latency.summary();
         st.latency_sum_ns = self.latency.sum_ns();
         st.hops = [
             self.setpoint_to_awake.hop_latency(),
             self.awake_to_torque.hop_latency(),
         ];
-        st.peak_torque = core.peak_torque;
-        st.motion_time_s = core.last_tick().unwrap_or(0) as f64 / self.rate_hz;
-        st.last_input_refusal = core
-            .last_refusal
-            .map_or(RefusalReason::None, Refusal::reason) as u32;
     }
 }

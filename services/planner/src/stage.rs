@@ -317,6 +317,9 @@ impl Stage for PlannerStage {
         st.program_state = state as u32;
         st.program_end = end as u32;
         st.activity = core.activity() as u32;
+    }
+
+    fn report_latency(&self, st: &mut ServiceStatus) {
         st.latency = self.lateness.summary();
         st.latency_sum_ns = self.lateness.sum_ns();
         st.hops[0] = self.wake_to_setpoint.hop_latency();

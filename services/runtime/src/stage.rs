@@ -43,6 +43,14 @@ pub trait Stage {
     /// at the status period, when asked to, and once more at the end).
     fn report(&self, status: &mut ServiceStatus);
 
+    /// Writes the stage's latency summaries into its status (`latency`,
+    /// `latency_sum_ns`, `hops`). Their percentiles scan each histogram's counts (about
+    /// 10 µs after a sleep), so the runner asks for them at most once per
+    /// [`crate::status::MEASURE_PERIOD_NS`] and in the final status, not at every
+    /// status; each summary is consistent in itself (count, sum and percentiles of the
+    /// same samples).
+    fn report_latency(&self, _status: &mut ServiceStatus) {}
+
     /// The last word on the way out (SIGINT/SIGTERM or the supervisor's death), before
     /// the final status: e.g. the actuator's last, safe state.
     fn finish(&mut self, _ports: &Self::Ports) {}
@@ -165,8 +173,11 @@ pub fn serve<S: Stage>(
     let mut reactor = Reactor::new().context("epoll")?;
     let on = S::register(&ports, &mut reactor).context("epoll")?;
     let on_stop = reactor.add(shutdown).context("epoll")?;
+    let now = monotonic_ns();
     stage.report(&mut status);
-    status_port.publish(monotonic_ns(), &mut status);
+    stage.report_latency(&mut status);
+    status_port.measure(now, &mut status);
+    status_port.publish(now, &mut status);
 
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
     let mut housekeeping = crate::enter_cycle(cfg);
@@ -194,15 +205,21 @@ pub fn serve<S: Stage>(
         }
         sweep = now.saturating_sub(swept_ns) >= SWEEP_NS;
         if asked || status_port.due(now) {
+            let measure = status_port.measure_due(now);
             // Below the cycle's priority: the stage this wake-up's message woke goes first.
             housekeeping.run(|| {
                 stage.report(&mut status);
+                if measure {
+                    stage.report_latency(&mut status);
+                    status_port.measure(now, &mut status);
+                }
                 status_port.publish(now, &mut status);
             });
         }
     }
     stage.finish(&ports);
     stage.report(&mut status);
+    stage.report_latency(&mut status);
     status_port.publish_final(&mut status);
     Ok(())
 }

@@ -1,5 +1,12 @@
-//! The ~10 Hz status/heartbeat publisher every service owns: fills identity, stamp,
-//! CPU time and RSS, and publishes on the Status service (plus its event).
+//! The ~10 Hz status/heartbeat publisher every service owns: fills identity, stamp and
+//! CPU time, and publishes on the Status service (plus its event).
+//!
+//! Measurements that cost more than the rest of a status together are refreshed at most
+//! once per [`MEASURE_PERIOD_NS`] (and in the final status): the resident set size (a
+//! `/proc/self/statm` read, about 18 µs after a status period's sleep) and the stage's
+//! latency percentiles ([`crate::Stage::report_latency`], a scan of each histogram's
+//! counts, about 10 µs). Between refreshes a status carries the last values; the
+//! counters, the lifecycle and the CPU time are fresh in every status.
 
 use iceoryx2::prelude::*;
 use microrobot_messages::{LifecycleState, ServiceRole, ServiceStatus, monotonic_ns, topic};
@@ -8,12 +15,18 @@ use crate::ports::Outbox;
 
 use crate::stats::{RssReader, cpu_time_ms};
 
+/// The shortest time between two refreshes of a status's costly measurements (ns): the
+/// resident set size and the latency percentiles. `cargo run --release -p
+/// microrobot-runtime --example summary_cost` measures what they cost.
+pub const MEASURE_PERIOD_NS: u64 = 1_000_000_000;
+
 /// Publishes [`ServiceStatus`] at the configured period.
 pub struct StatusPort {
     out: Outbox<ServiceStatus>,
     rss: RssReader,
     period_ns: u64,
     next_due_ns: u64,
+    next_measure_ns: u64,
     seq: u64,
     role: ServiceRole,
     pid: u32,
@@ -32,6 +45,7 @@ impl StatusPort {
             rss: RssReader::new(),
             period_ns: crate::config::ms_to_ns(period_ms),
             next_due_ns: 0,
+            next_measure_ns: 0,
             seq: 0,
             role,
             pid: std::process::id(),
@@ -42,6 +56,21 @@ impl StatusPort {
     #[inline]
     pub fn due(&self, now_ns: u64) -> bool {
         now_ns >= self.next_due_ns
+    }
+
+    /// Whether the costly measurements are due at `now_ns` (the first status, then at
+    /// most once per [`MEASURE_PERIOD_NS`]); [`StatusPort::measure`] takes them.
+    #[inline]
+    pub fn measure_due(&self, now_ns: u64) -> bool {
+        now_ns >= self.next_measure_ns
+    }
+
+    /// Refreshes the port's own costly measurement (the resident set size) in `st` and
+    /// schedules the next refresh; the caller refreshes the stage's
+    /// ([`crate::Stage::report_latency`]) with it.
+    pub fn measure(&mut self, now_ns: u64, st: &mut ServiceStatus) {
+        st.rss_kib = self.rss.rss_kib();
+        self.next_measure_ns = now_ns.saturating_add(MEASURE_PERIOD_NS);
     }
 
     /// Period in ns.
@@ -58,14 +87,15 @@ impl StatusPort {
         st.role = self.role as u32;
         st.pid = self.pid;
         st.cpu_time_ms = cpu_time_ms();
-        st.rss_kib = self.rss.rss_kib();
         self.next_due_ns = now_ns + self.period_ns;
         self.out.send(*st)
     }
 
-    /// Publishes the final status (lifecycle Finalized).
+    /// Publishes the final status (lifecycle Finalized), its measurements fresh.
     pub fn publish_final(&mut self, st: &mut ServiceStatus) {
         st.lifecycle = LifecycleState::Finalized as u32;
-        self.publish(monotonic_ns(), st);
+        let now = monotonic_ns();
+        self.measure(now, st);
+        self.publish(now, st);
     }
 }
