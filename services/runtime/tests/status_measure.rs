@@ -7,12 +7,13 @@ use std::cell::Cell;
 use std::time::{Duration, Instant};
 
 use microrobot_messages::{LifecycleState, ServiceRole, ServiceStatus, monotonic_ns, topic};
-use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::node::named_node;
 use microrobot_runtime::status::MEASURE_PERIOD_NS;
 use microrobot_runtime::{
     Cycle, Inbox, Reactor, Ready, Shutdown, Source, Stage, Subscription, TimerFd, serve,
 };
+
+mod common;
 
 /// The stage's tick: 1 kHz.
 const TICK_NS: u64 = 1_000_000;
@@ -61,14 +62,7 @@ fn counters_are_fresh_in_every_status_and_measurements_at_most_once_a_period() {
         std::process::id(),
         monotonic_ns() % 1_000_000
     );
-    let mut cfg = PipelineConfig {
-        instance: instance.clone(),
-        ..PipelineConfig::default()
-    };
-    cfg.realtime.cpu_affinity.clear();
-    cfg.realtime.pm_qos = false;
-    cfg.realtime.sched_fifo_priority = 0;
-    cfg.realtime.mlockall = false;
+    let mut cfg = common::plain_config(&instance);
     cfg.status_period_ms = 20.0;
 
     let node = named_node(&format!("measure.{}", std::process::id())).unwrap();

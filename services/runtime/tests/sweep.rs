@@ -13,12 +13,13 @@ use std::time::{Duration, Instant};
 use microrobot_messages::{
     MotionCommand, ServiceRole, ServiceStatus, monotonic_ns, open_publish_subscribe, topic,
 };
-use microrobot_runtime::config::PipelineConfig;
 use microrobot_runtime::node::named_node;
 use microrobot_runtime::{
     Cycle, Inbox, Outbox, Reactor, Ready, SWEEP_NS, Shutdown, Source, Stage, Subscription, TimerFd,
     serve,
 };
+
+mod common;
 
 /// The stage's tick: a 4 kHz cycle, four wake-ups per sweep when nothing is late.
 const TICK_NS: u64 = 250_000;
@@ -92,18 +93,6 @@ impl Stage for Sweeper {
     fn report(&self, _status: &mut ServiceStatus) {}
 }
 
-fn config(instance: &str) -> PipelineConfig {
-    let mut cfg = PipelineConfig {
-        instance: instance.into(),
-        ..PipelineConfig::default()
-    };
-    cfg.realtime.cpu_affinity.clear();
-    cfg.realtime.pm_qos = false;
-    cfg.realtime.sched_fifo_priority = 0;
-    cfg.realtime.mlockall = false;
-    cfg
-}
-
 /// The next message other than a sweep, counting the sweeps before it.
 fn next_other(seen: &mpsc::Receiver<Seen>, sweeps: &mut u32) -> Seen {
     let give_up = Instant::now() + Duration::from_secs(10);
@@ -127,7 +116,7 @@ fn command(seq: u64) -> MotionCommand {
 /// Runs a [`Sweeper`] on the `command` stream of a fresh instance while `body` runs.
 fn with_sweeper(body: impl FnOnce(&str, &mpsc::Receiver<Seen>, &AtomicBool)) {
     let instance = format!("sweep{}-{}", std::process::id(), monotonic_ns() % 1_000_000);
-    let cfg = config(&instance);
+    let cfg = common::plain_config(&instance);
     let shutdown = Shutdown::new().unwrap();
     let (tx, seen) = mpsc::channel();
     let block = Arc::new(AtomicBool::new(false));
