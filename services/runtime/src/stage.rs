@@ -166,7 +166,7 @@ pub fn serve<S: Stage>(
         ..
     } = setup;
     let Some((mut stage, ports)) = built else {
-        status_port.publish_final(&mut status);
+        status_port.publish_final(&mut status, |_| {});
         return Ok(());
     };
 
@@ -175,8 +175,7 @@ pub fn serve<S: Stage>(
     let on_stop = reactor.add(shutdown).context("epoll")?;
     let now = monotonic_ns();
     stage.report(&mut status);
-    stage.report_latency(&mut status);
-    status_port.measure(now, &mut status);
+    status_port.measure(now, &mut status, |st| stage.report_latency(st));
     status_port.publish(now, &mut status);
 
     // Set up: from here on the loop runs pinned and SCHED_FIFO.
@@ -210,8 +209,7 @@ pub fn serve<S: Stage>(
             housekeeping.run(|| {
                 stage.report(&mut status);
                 if measure {
-                    stage.report_latency(&mut status);
-                    status_port.measure(now, &mut status);
+                    status_port.measure(now, &mut status, |st| stage.report_latency(st));
                 }
                 status_port.publish(now, &mut status);
             });
@@ -219,7 +217,6 @@ pub fn serve<S: Stage>(
     }
     stage.finish(&ports);
     stage.report(&mut status);
-    stage.report_latency(&mut status);
-    status_port.publish_final(&mut status);
+    status_port.publish_final(&mut status, |st| stage.report_latency(st));
     Ok(())
 }

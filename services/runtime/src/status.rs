@@ -65,10 +65,16 @@ impl StatusPort {
         now_ns >= self.next_measure_ns
     }
 
-    /// Refreshes the port's own costly measurement (the resident set size) in `st` and
-    /// schedules the next refresh; the caller refreshes the stage's
-    /// ([`crate::Stage::report_latency`]) with it.
-    pub fn measure(&mut self, now_ns: u64, st: &mut ServiceStatus) {
+    /// Refreshes every costly measurement in `st`, the stage's (`stage_latency`, e.g.
+    /// [`crate::Stage::report_latency`]) and the port's own (the resident set size), and
+    /// schedules the next refresh: one call, so neither is refreshed without the other.
+    pub fn measure(
+        &mut self,
+        now_ns: u64,
+        st: &mut ServiceStatus,
+        stage_latency: impl FnOnce(&mut ServiceStatus),
+    ) {
+        stage_latency(st);
         st.rss_kib = self.rss.rss_kib();
         self.next_measure_ns = now_ns.saturating_add(MEASURE_PERIOD_NS);
     }
@@ -91,11 +97,16 @@ impl StatusPort {
         self.out.send(*st)
     }
 
-    /// Publishes the final status (lifecycle Finalized), its measurements fresh.
-    pub fn publish_final(&mut self, st: &mut ServiceStatus) {
+    /// Publishes the final status (lifecycle Finalized), its measurements fresh
+    /// (`stage_latency` as for [`StatusPort::measure`]).
+    pub fn publish_final(
+        &mut self,
+        st: &mut ServiceStatus,
+        stage_latency: impl FnOnce(&mut ServiceStatus),
+    ) {
         st.lifecycle = LifecycleState::Finalized as u32;
         let now = monotonic_ns();
-        self.measure(now, st);
+        self.measure(now, st, stage_latency);
         self.publish(now, st);
     }
 }
