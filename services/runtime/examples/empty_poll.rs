@@ -6,8 +6,12 @@
 //!
 //! `cargo run --release -p microrobot-runtime --example empty_poll -- [POLLS]`
 
-use microrobot_messages::{MotionCommand, monotonic_ns, topic};
+use std::time::Duration;
+
+use microrobot_messages::{MotionCommand, topic};
 use microrobot_runtime::{Inbox, Subscription};
+
+mod common;
 
 fn main() -> anyhow::Result<()> {
     let polls: usize = match std::env::args().nth(1) {
@@ -25,25 +29,13 @@ fn main() -> anyhow::Result<()> {
         topic::COMMAND,
         Subscription::CYCLIC.default_queue(),
     )?;
-    println!("{polls} empty receives (each timed with two clock reads):");
-    for (name, sleep_us) in [("back to back", 0u64), ("after a 250 µs sleep", 250)] {
-        let mut ns = Vec::with_capacity(polls);
-        for _ in 0..polls {
-            if sleep_us > 0 {
-                std::thread::sleep(std::time::Duration::from_micros(sleep_us));
-            }
-            let t0 = monotonic_ns();
-            let got = inbox.next().is_some();
-            ns.push(monotonic_ns() - t0);
-            std::hint::black_box(got);
-        }
-        ns.sort_unstable();
-        let mean = ns.iter().sum::<u64>() as f64 / ns.len() as f64;
-        println!(
-            "  {name:<22} p50 {} ns, p90 {} ns, mean {mean:.0} ns",
-            ns[ns.len() / 2],
-            ns[ns.len() * 9 / 10]
-        );
-    }
+    common::time_warm_and_after_sleep(
+        &format!("{polls} empty receives, after a 250 µs sleep"),
+        Duration::from_micros(250),
+        polls,
+        || {
+            std::hint::black_box(inbox.next().is_some());
+        },
+    );
     Ok(())
 }

@@ -1,35 +1,19 @@
-//! What a status report's own work costs (µs): the percentiles of a latency histogram
-//! filled like a control cycle's hop (most values 4–20 µs, a tail to a few ms), the
-//! process CPU time and the resident set size, each measured after a 100 ms sleep (the
-//! status period: caches and TLB as a service finds them) and warm (back to back).
+//! What a status report's own work costs: the percentiles of a latency histogram filled
+//! like a control cycle's hop (most values 4–20 µs, a tail to a few ms), the process CPU
+//! time and the resident set size, each back to back and after a 100 ms sleep (the status
+//! period: caches and TLB as a service finds them).
 //! Run: `cargo run --release -p microrobot-runtime --example summary_cost`.
 
-use microrobot_runtime::stats::{LatencyHistogram, RssReader, cpu_time_ms};
 use std::hint::black_box;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-/// Mean µs of `f` after a sleep of the status period, and its fastest warm call.
-fn cost(name: &str, mut f: impl FnMut()) {
-    let mut warm = Duration::MAX;
-    for _ in 0..200 {
-        let t = Instant::now();
-        f();
-        warm = warm.min(t.elapsed());
-    }
-    let n = 20;
-    let mut cold = Duration::ZERO;
-    for _ in 0..n {
-        std::thread::sleep(Duration::from_millis(100));
-        let t = Instant::now();
-        f();
-        cold += t.elapsed();
-    }
-    println!(
-        "{name:32} after a sleep {:6.1} µs   warm {:6.1} µs",
-        cold.as_secs_f64() * 1e6 / f64::from(n),
-        warm.as_secs_f64() * 1e6
-    );
-}
+use microrobot_runtime::stats::{LatencyHistogram, RssReader, cpu_time_ms};
+
+mod common;
+use common::time_warm_and_after_sleep;
+
+/// Calls timed each way (20 sleeps of 100 ms: 2 s per line).
+const CALLS: usize = 20;
 
 fn main() {
     let mut h = LatencyHistogram::new();
@@ -46,16 +30,22 @@ fn main() {
         h.record(v);
     }
     let rss = RssReader::new();
-    cost("summary (p50..p99.99, max)", || {
-        black_box(h.summary());
-    });
-    cost("hop_latency (p50..p99.9, max)", || {
+    let sleep = Duration::from_millis(100);
+    time_warm_and_after_sleep(
+        "latency summary (p50 … p99.99, max)",
+        sleep,
+        CALLS,
+        || {
+            black_box(h.summary());
+        },
+    );
+    time_warm_and_after_sleep("hop summary (p50 … p99.9, max)", sleep, CALLS, || {
         black_box(h.hop_latency());
     });
-    cost("cpu_time_ms (getrusage)", || {
+    time_warm_and_after_sleep("cpu_time_ms (getrusage)", sleep, CALLS, || {
         black_box(cpu_time_ms());
     });
-    cost("rss_kib (/proc/self/statm)", || {
+    time_warm_and_after_sleep("rss_kib (/proc/self/statm)", sleep, CALLS, || {
         black_box(rss.rss_kib());
     });
 }
