@@ -9,9 +9,6 @@ use microrobot_messages::{HopLatency, LatencySummary};
 /// The histogram's lowest discernible value (ns): its resolution below 2048 × this.
 const LOWEST_NS: u64 = 16;
 
-/// The quantiles a [`LatencySummary`] carries, ascending (one pass over the counts).
-const QUANTILES: [f64; 4] = [0.50, 0.99, 0.999, 0.9999];
-
 /// A fixed-range latency histogram in ns, and the exact sum of what it recorded (the
 /// histogram's own mean is bucketed; the sum keeps the means of consecutive hops
 /// adding up exactly). Recording never allocates.
@@ -79,34 +76,47 @@ impl LatencyHistogram {
             .collect()
     }
 
-    /// Percentiles for the status message (zeros when empty), in one pass over the
-    /// counts (each value exactly what `value_at_quantile` gives).
+    /// The values at `quantiles` (ascending) in one pass over the counts, each exactly
+    /// what `value_at_quantile` gives; the pass stops at the last one, so a caller asks
+    /// only for what it keeps.
+    fn values_at<const N: usize>(&self, quantiles: [f64; N]) -> [u64; N] {
+        let mut out = [0; N];
+        for (o, v) in out.iter_mut().zip(self.hist.value_at_quantiles(quantiles)) {
+            *o = v;
+        }
+        out
+    }
+
+    /// Percentiles for the status message (zeros when empty).
     pub fn summary(&self) -> LatencySummary {
         if self.hist.is_empty() {
             return LatencySummary::default();
         }
-        let mut q = self.hist.value_at_quantiles(QUANTILES);
-        let mut next = || q.next().unwrap_or(0);
+        let [p50_ns, p99_ns, p999_ns, p9999_ns] = self.values_at([0.50, 0.99, 0.999, 0.9999]);
         LatencySummary {
             count: self.hist.len(),
-            p50_ns: next(),
-            p99_ns: next(),
-            p999_ns: next(),
-            p9999_ns: next(),
+            p50_ns,
+            p99_ns,
+            p999_ns,
+            p9999_ns,
             max_ns: self.hist.max(),
         }
     }
 
-    /// Count, exact sum and percentiles, as a status carries one hop (zeros when empty).
+    /// Count, exact sum and percentiles, as a status carries one hop (zeros when empty;
+    /// no p99.99, so the pass over the counts stops at the p99.9).
     pub fn hop_latency(&self) -> HopLatency {
-        let l = self.summary();
+        if self.hist.is_empty() {
+            return HopLatency::default();
+        }
+        let [p50_ns, p99_ns, p999_ns] = self.values_at([0.50, 0.99, 0.999]);
         HopLatency {
-            count: l.count,
+            count: self.hist.len(),
             sum_ns: self.sum_ns,
-            p50_ns: l.p50_ns,
-            p99_ns: l.p99_ns,
-            p999_ns: l.p999_ns,
-            max_ns: l.max_ns,
+            p50_ns,
+            p99_ns,
+            p999_ns,
+            max_ns: self.hist.max(),
         }
     }
 }
@@ -251,6 +261,7 @@ mod tests {
     fn one_pass_summary_is_each_quantile_on_its_own() {
         let mut h = LatencyHistogram::new();
         let mut samples = Vec::new();
+        let mut raw_sum = 0u64;
         let mut x: u64 = 12345;
         for i in 0..50_000u64 {
             x = x
@@ -264,6 +275,7 @@ mod tests {
                 _ => 5_000 + (x >> 40) % 40_000,
             };
             h.record(v);
+            raw_sum += v;
             samples.push(v.max(1));
         }
         let s = h.summary();
@@ -272,6 +284,12 @@ mod tests {
             [s.p50_ns, s.p99_ns, s.p999_ns, s.p9999_ns],
             [one(0.5), one(0.99), one(0.999), one(0.9999)]
         );
+        let hop = h.hop_latency();
+        assert_eq!(
+            [hop.p50_ns, hop.p99_ns, hop.p999_ns, hop.max_ns, hop.count],
+            [one(0.5), one(0.99), one(0.999), s.max_ns, s.count]
+        );
+        assert_eq!(hop.sum_ns, raw_sum);
         // Below 32.8 µs the histogram steps by 16 ns: the median reported is the true
         // one rounded up to its step's top; above, within 0.1 %.
         samples.sort_unstable();
